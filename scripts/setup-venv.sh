@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# Create or refresh .venv with the pinned dependencies and wtinspect installed (editable).
+# Idempotent: re-installs only when requirements.lock or pyproject.toml changed.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=${PYTHON:-python3}
+if [ ! -x .venv/bin/python ]; then
+  "$PY" -m venv .venv
+fi
+stamp=.venv/.wtinspect-installed
+want=$(cat requirements.lock pyproject.toml | sha256sum | cut -d' ' -f1)
+if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
+  .venv/bin/python -m pip install -q --disable-pip-version-check -r requirements.lock >&2
+  .venv/bin/python -m pip install -q --disable-pip-version-check --no-deps -e . >&2
+  echo "$want" > "$stamp"
+fi

@@ -1,0 +1,128 @@
+"""The one geometry: turbine model and camera model, checked against known answers."""
+
+import math
+
+import numpy as np
+import pytest
+
+from wtcli.geometry import BLADE_SIDES, Camera, Turbine
+from wtcli.geometry.render import instance_masks, part_id_map
+
+
+def make_turbine(az=90.0, yaw=0.0, **kw):
+    base = dict(id="T1", base=(0, 0, 0), hub_height=80, rotor_diameter=90, yaw_deg=yaw)
+    base.update(kw)
+    return Turbine.with_rotor_azimuth(az, **base)
+
+
+def front_camera(t, dist=110.0, w=640, h=480):
+    return Camera(w, h, 16, 23.2).looking_at(t.hub_center + t.axis * dist, t.hub_center)
+
+
+@pytest.mark.parametrize("yaw", [0, 37, 90, 200, 359])
+@pytest.mark.parametrize("az", [0, 45, 90, 181, 300])
+def test_front_view_image_angle_equals_rotor_azimuth(yaw, az):
+    t = make_turbine(az, yaw)
+    cam = front_camera(t)
+    for k in range(3):
+        got = cam.image_angle_deg(t.hub_center, t.blade_tips()[k])
+        want = (az + 120 * k) % 360
+        assert abs((got - want + 180) % 360 - 180) < 1e-6
+
+
+def test_tips_at_rotor_radius_and_axis_points_to_heading():
+    t = make_turbine(yaw=90)
+    assert np.allclose(t.axis, [1, 0, 0])
+    assert np.allclose(np.linalg.norm(t.blade_tips() - t.hub_center, axis=1), 45)
+
+
+def test_clearance_known_answers():
+    t = make_turbine()
+    # 10 m in front of the tower base's surface, on the ground.
+    p = t.base_xyz + np.array([t.tower_base_radius + 10, 0, 0.0])
+    assert t.clearance(p)[0] == pytest.approx(10, abs=1e-6)
+    # Above the hub along z, beyond the upright blade's tip.
+    p = t.blade_tips()[0] + np.array([0, 0, 7.0])
+    assert t.clearance(p)[0] == pytest.approx(7, abs=1e-6)
+    # Inside the nacelle.
+    assert t.clearance(t.nacelle_center)[0] == 0
+
+
+def test_clearance_never_exceeds_distance_to_dense_surface():
+    """Safety: the model's clearance is a lower bound of the true distance to the surface."""
+    rng = np.random.default_rng(1)
+    for trial in range(4):
+        t = make_turbine(az=rng.uniform(0, 360), yaw=rng.uniform(0, 360),
+                         blade_pitch_deg=rng.uniform(0, 90))
+        dense = t.surface_samples(0.15)
+        P = t.hub_center + rng.normal(size=(400, 3)) * rng.uniform(3, 30)
+        c = t.clearance(P)
+        d = np.array([np.linalg.norm(dense.points - p, axis=1).min() for p in P])
+        inside = c == 0
+        assert (c[~inside] <= d[~inside] + 1e-6).all()
+        # ... and not pessimistic by more than the sampling resolution away from the junctions.
+        assert np.median(d[~inside] - c[~inside]) < 0.1
+
+
+def test_offset_along_normal_gives_that_clearance_on_blades():
+    t = make_turbine(az=20, yaw=45)
+    s = t.surface_samples(0.5, parts="blades")
+    s = s[s.span > 0.1]
+    own = t.clearance_by_part(s.points + 3.0 * s.normals)[np.arange(len(s)), s.blade]
+    assert own.min() > 2.95 and own.max() <= 3.0 + 1e-9
+
+
+def test_segment_clearance_is_a_lower_bound():
+    t = make_turbine()
+    a = t.hub_center + t.axis * 30 + np.array([-60, 0, 0])
+    b = t.hub_center + t.axis * 2 + np.array([60, 0, 0])
+    lb = t.segment_clearance(a[None], b[None], step=0.5)[0]
+    dense = np.linspace(a, b, 5000)
+    assert lb <= t.clearance(dense).min() + 1e-9
+    assert lb > t.clearance(dense).min() - 0.3
+
+
+def test_surface_samples_labels():
+    t = make_turbine()
+    s = t.surface_samples(0.5)
+    blades = s[s.blade >= 0]
+    assert set(np.unique(blades.side)) == set(range(len(BLADE_SIDES)))
+    assert np.allclose(np.linalg.norm(s.normals, axis=1), 1)
+    # Leading-edge normals of a feathered blade face the front.
+    le = blades[blades.side == 0]
+    assert (le.normals @ t.axis).mean() > 0.8
+    area = s.area[s.blade == 0].sum()
+    assert 100 < area < 1000  # a 45 m blade has a few hundred m^2 of surface
+
+
+def test_camera_projection_roundtrip_and_gsd():
+    cam = Camera(5456, 3632, 16, 23.2).looking_at(np.array([0, -10, 50.0]), np.array([0, 0, 50.0]))
+    assert cam.gsd_mm(10) == pytest.approx(2.657, abs=1e-3)  # formats.md example
+    assert cam.distance_for_gsd(cam.gsd_mm(7.5)) == pytest.approx(7.5)
+    P = np.array([[1.0, 5, 52], [-3, 20, 47]])
+    uv, z = cam.project(P)
+    back = cam.rays(uv)
+    assert np.allclose(back, (P - cam.position) / np.linalg.norm(P - cam.position, axis=1)[:, None])
+    assert (z > 0).all()
+
+
+def test_roll_turns_the_image_clockwise():
+    t = make_turbine(az=0)
+    cam = front_camera(t)
+    rolled = Camera(640, 480, 16, 23.2).looking_at(cam.position, t.hub_center, roll_deg=10)
+    a0 = cam.image_angle_deg(t.hub_center, t.blade_tips()[0])
+    a1 = rolled.image_angle_deg(t.hub_center, t.blade_tips()[0])
+    assert (a0 - a1) % 360 == pytest.approx(10, abs=1e-6)
+
+
+def test_masks_show_each_part_with_occlusion():
+    t = make_turbine(az=270 - 120)  # one blade straight down, in front of the tower
+    cam = front_camera(t)
+    inst = instance_masks(t, cam)
+    labels = [l for l, _, _ in inst]
+    assert labels.count("blade") == 3 and "tower" in labels and "nacelle" in labels
+    ids = part_id_map(t, cam)
+    # Just below the hub, the down blade hides the tower.
+    uv, _ = cam.project(t.hub_center - np.array([0, 0, 15.0]) + t.axis * 0.0)
+    u, v = np.round(uv[0]).astype(int)
+    assert ids[v, u] == 1  # blade 2 (index 1) points down: 150 + 120 = 270

@@ -1,0 +1,3 @@
+"""wtinspect: offline perception and planning for drone inspection of wind turbines."""
+
+__version__ = "0.1.0"

@@ -1,0 +1,3 @@
+from wtcli.cli import main
+
+main()

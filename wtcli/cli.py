@@ -1,0 +1,107 @@
+"""The `wtinspect` command line: global options, command discovery and the one error boundary.
+
+Each subcommand lives in ``wtcli/commands/<name>.py`` and exposes ``register(app)``; this file
+never needs editing to add one. Commands parse options, call one library function and print.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import pkgutil
+import sys
+import traceback
+from typing import Any, Optional
+
+import typer
+from typer.core import TyperGroup
+
+from wtcli import __version__
+from wtcli.console import err_console
+from wtcli.errors import ExitCode, WtError
+
+
+def _debug(ctx: typer.Context) -> bool:
+    obj = ctx.find_root().obj
+    return bool(obj and obj.get("debug")) or os.environ.get("WTINSPECT_DEBUG") == "1"
+
+
+class _Boundary(TyperGroup):
+    """Maps our exceptions to one red line on stderr and a documented exit code."""
+
+    def list_commands(self, ctx: typer.Context) -> list[str]:
+        # Keep the pipeline order in --help rather than alphabetical.
+        order = ["synth", "segment", "contours", "pitch", "plan", "fly", "train"]
+        names = list(self.commands)
+        return sorted(names, key=lambda n: (order.index(n) if n in order else len(order), n))
+
+    def invoke(self, ctx: typer.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except (typer.Exit, typer.Abort, typer.TyperException):
+            raise
+        except KeyboardInterrupt:
+            err_console.print("[red]interrupted[/red]")
+            ctx.exit(ExitCode.INTERRUPTED)
+        except WtError as e:
+            if _debug(ctx):
+                err_console.print(traceback.format_exc(), markup=False)
+            err_console.print(f"[red]error:[/red] {e}", markup=True, soft_wrap=True)
+            ctx.exit(int(e.exit_code))
+        except Exception as e:  # noqa: BLE001 - the one place that catches everything
+            if _debug(ctx):
+                err_console.print(traceback.format_exc(), markup=False)
+                ctx.exit(ExitCode.UNEXPECTED)
+            err_console.print(f"[red]unexpected error:[/red] {e.__class__.__name__}: {e} "
+                              "(run with --debug for the traceback)", markup=True,
+                              soft_wrap=True)
+            ctx.exit(ExitCode.UNEXPECTED)
+
+
+app = typer.Typer(
+    cls=_Boundary,
+    name="wtinspect",
+    help="Drone inspection of wind turbines: segment -> contours -> pitch -> plan -> fly.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"wtinspect {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    ctx: typer.Context,
+    version: Optional[bool] = typer.Option(None, "--version", callback=_version, is_eager=True,
+                                           help="Print the version and exit."),
+    debug: bool = typer.Option(False, "--debug", help="Show tracebacks on errors."),
+) -> None:
+    """Drone inspection of wind turbines: segment -> contours -> pitch -> plan -> fly.
+
+    Exit codes: 0 ok, 1 unexpected, 2 usage, 3 input, 4 config, 5 perception, 6 plan,
+    7 model, 8 simulation, 9 partial batch failure, 130 interrupted (docs/exit-codes.md).
+    """
+    ctx.obj = {"debug": debug}
+
+
+def _register_commands() -> None:
+    import wtcli.commands as pkg
+
+    for info in sorted(pkgutil.iter_modules(pkg.__path__), key=lambda i: i.name):
+        if info.name.startswith("_"):
+            continue
+        module = importlib.import_module(f"wtcli.commands.{info.name}")
+        module.register(app)
+
+
+_register_commands()
+
+
+def main(argv: list[str] | None = None) -> None:
+    app(args=argv if argv is not None else sys.argv[1:], prog_name="wtinspect")

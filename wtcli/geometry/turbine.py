@@ -1,0 +1,553 @@
+"""The one turbine model: tower frustum, nacelle box, hub sphere and N tapered blades.
+
+Every other part of wtinspect (renderer, planner, coverage, simulator) asks this model for
+geometry; nothing else may keep a private copy of the shapes.
+
+Frames (DESIGN.md): world is local ENU metres (x east, y north, z up). ``yaw_deg`` is the
+compass heading the rotor faces (0 = north, 90 = east), so the rotor axis unit vector ``axis``
+points from the nacelle out through the hub towards a viewer standing in front of the rotor.
+A blade's rotor azimuth is measured in the rotor plane as that front viewer sees it,
+counter-clockwise from the viewer's right (0 = right, 90 = up, 270 = down): the same convention
+as the image angle φ that ``pitch`` reports from a front photo.
+
+Blade cross-sections are ellipses: semi-axis chord/2 along the chord direction (leading edge at
++chord) and thickness/2 along the thickness direction (pressure side at +thickness). With
+``blade_pitch_deg`` = 90 (feathered, the usual parked state) the leading edge faces the front.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+Z = np.array([0.0, 0.0, 1.0])
+
+BLADE_SIDES = ("leading_edge", "pressure_side", "trailing_edge", "suction_side")
+
+# Planform as fractions of the blade's span stations: chord rises from the root cylinder to its
+# maximum at 20 % span, then tapers to the tip (typical of 40-80 m utility blades).
+_MAX_CHORD_AT = 0.2
+_ROOT_THICKNESS_RATIO = 1.0  # circular root
+_MAX_CHORD_THICKNESS_RATIO = 0.40
+_TIP_THICKNESS_RATIO = 0.18
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+@dataclass(frozen=True)
+class Turbine:
+    """A horizontal-axis wind turbine with its rotor stopped.
+
+    Sizes left as None are filled from typical proportions of the rotor radius and hub height.
+    """
+
+    id: str
+    base: tuple[float, float, float]  # tower base on the ground, ENU metres
+    hub_height: float  # hub centre above the tower base, m
+    rotor_diameter: float  # m; the blade tip radius is half of it
+    yaw_deg: float  # compass heading the rotor faces
+    azimuths_deg: tuple[float, ...]  # rotor azimuth of each blade (see module docstring)
+    blade_pitch_deg: float = 90.0  # 0 = chord in the rotor plane, 90 = feathered
+    tower_base_radius: float | None = None
+    tower_top_radius: float | None = None
+    nacelle_length: float | None = None
+    nacelle_width: float | None = None
+    nacelle_height: float | None = None
+    hub_radius: float | None = None
+    overhang: float | None = None  # tower axis -> hub centre, along the rotor axis, m
+    blade_root_chord: float | None = None
+    blade_max_chord: float | None = None
+    blade_tip_chord: float | None = None
+    _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        R = self.rotor_diameter / 2.0
+        defaults = {
+            "tower_base_radius": max(1.0, 0.026 * self.hub_height),
+            "nacelle_length": 0.25 * R,
+            "nacelle_width": 0.09 * R,
+            "nacelle_height": 0.09 * R,
+            "hub_radius": 0.05 * R,
+            "blade_root_chord": 0.055 * R,
+            "blade_max_chord": 0.075 * R,
+            "blade_tip_chord": 0.015 * R,
+        }
+        for k, v in defaults.items():
+            if getattr(self, k) is None:
+                object.__setattr__(self, k, float(v))
+        if self.tower_top_radius is None:
+            object.__setattr__(self, "tower_top_radius", 0.6 * self.tower_base_radius)
+        if self.overhang is None:
+            object.__setattr__(self, "overhang", 0.5 * self.nacelle_length + 0.8 * self.hub_radius)
+        object.__setattr__(self, "base", tuple(float(x) for x in self.base))
+        object.__setattr__(self, "azimuths_deg", tuple(float(a) % 360.0 for a in self.azimuths_deg))
+        self._check()
+
+    def _check(self) -> None:
+        def need(cond: bool, what: str) -> None:
+            if not cond:
+                raise ValueError(f"turbine {self.id!r}: {what}")
+
+        need(len(self.base) == 3 and all(math.isfinite(x) for x in self.base),
+             f"expected base as 3 finite numbers, got {self.base}")
+        need(self.rotor_diameter > 0, f"expected rotor_diameter > 0, got {self.rotor_diameter}")
+        need(len(self.azimuths_deg) >= 1, "expected at least one blade")
+        for name in ("tower_base_radius", "tower_top_radius", "nacelle_length", "nacelle_width",
+                     "nacelle_height", "hub_radius", "blade_root_chord", "blade_max_chord",
+                     "blade_tip_chord"):
+            need(getattr(self, name) > 0, f"expected {name} > 0, got {getattr(self, name)}")
+        need(self.overhang >= 0, f"expected overhang >= 0, got {self.overhang}")
+        need(self.hub_height > self.nacelle_height,
+             f"expected hub_height > nacelle_height, got {self.hub_height}")
+        # A blade pointing straight down must stay clear of the ground.
+        need(self.hub_height > self.tip_radius + 1.0,
+             f"expected hub_height ({self.hub_height}) > blade tip radius ({self.tip_radius}) + 1 m")
+        need(self.hub_radius < self.tip_radius / 2, "expected hub_radius < a quarter of the rotor diameter")
+
+    # ---- frame --------------------------------------------------------------------------
+    @classmethod
+    def with_rotor_azimuth(cls, rotor_azimuth_deg: float, blades: int = 3, **kw: Any) -> Turbine:
+        """Blades evenly spaced, blade 1 at ``rotor_azimuth_deg``."""
+        az = tuple(rotor_azimuth_deg + k * 360.0 / blades for k in range(blades))
+        return cls(azimuths_deg=az, **kw)
+
+    @property
+    def n_blades(self) -> int:
+        return len(self.azimuths_deg)
+
+    @property
+    def tip_radius(self) -> float:
+        return self.rotor_diameter / 2.0
+
+    @property
+    def axis(self) -> np.ndarray:
+        """Unit rotor axis: from the nacelle towards a viewer in front of the rotor."""
+        y = math.radians(self.yaw_deg)
+        return np.array([math.sin(y), math.cos(y), 0.0])
+
+    @property
+    def right(self) -> np.ndarray:
+        """The front viewer's right, horizontal, in the rotor plane."""
+        return np.cross(-self.axis, Z)
+
+    @property
+    def base_xyz(self) -> np.ndarray:
+        return np.array(self.base, dtype=float)
+
+    @property
+    def hub_center(self) -> np.ndarray:
+        return self.base_xyz + Z * self.hub_height + self.axis * self.overhang
+
+    @property
+    def tower_height(self) -> float:
+        return self.hub_height - 0.5 * self.nacelle_height
+
+    @property
+    def nacelle_center(self) -> np.ndarray:
+        # The box sits on the tower top, a little ahead of the tower axis, hub centre at its height.
+        return self.base_xyz + Z * self.hub_height + self.axis * (0.1 * self.nacelle_length)
+
+    def blade_direction(self, k: int) -> np.ndarray:
+        a = math.radians(self.azimuths_deg[k])
+        return math.cos(a) * self.right + math.sin(a) * Z
+
+    def blade_frame(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(span direction d, chord direction c towards the leading edge, thickness direction n
+        towards the pressure side), orthonormal."""
+        d = self.blade_direction(k)
+        t = np.cross(self.axis, d)
+        p = math.radians(self.blade_pitch_deg)
+        c = math.cos(p) * t + math.sin(p) * self.axis
+        n = np.cross(d, c)
+        return d, c, n
+
+    @property
+    def blade_root_offset(self) -> float:
+        """Distance from the hub centre where the blade body starts (inside the hub)."""
+        return 0.8 * self.hub_radius
+
+    def blade_tips(self) -> np.ndarray:
+        """(N, 3) tip points: the paper's eq. 2 input."""
+        return np.array([self.hub_center + self.tip_radius * self.blade_direction(k)
+                         for k in range(self.n_blades)])
+
+    def blade_roots(self) -> np.ndarray:
+        return np.array([self.hub_center + self.blade_root_offset * self.blade_direction(k)
+                         for k in range(self.n_blades)])
+
+    # ---- blade planform -------------------------------------------------------------------
+    def blade_semi_axes(self, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Semi-axes (chord/2, thickness/2) at span fraction f in [0, 1] (root -> tip)."""
+        f = np.clip(np.asarray(f, dtype=float), 0.0, 1.0)
+        fx = [0.0, _MAX_CHORD_AT, 1.0]
+        chord = np.interp(f, fx, [self.blade_root_chord, self.blade_max_chord, self.blade_tip_chord])
+        ratio = np.interp(f, fx, [_ROOT_THICKNESS_RATIO, _MAX_CHORD_THICKNESS_RATIO,
+                                  _TIP_THICKNESS_RATIO])
+        return chord / 2.0, ratio * chord / 2.0
+
+    def _blade_taper_cos(self) -> float:
+        """cos of the steepest taper of the blade surface: in-section distance times this is
+        never more than the true distance (keeps the clearance conservative)."""
+        if "taper_cos" not in self._cache:
+            L = self.tip_radius - self.blade_root_offset
+            f = np.linspace(0, 1, 201)
+            A, B = self.blade_semi_axes(f)
+            ds = L * (f[1] - f[0])
+            slope = max(np.abs(np.diff(A)).max(), np.abs(np.diff(B)).max()) / ds
+            self._cache["taper_cos"] = 1.0 / math.sqrt(1.0 + slope * slope)
+        return self._cache["taper_cos"]
+
+    # ---- clearance --------------------------------------------------------------------------
+    def part_names(self) -> list[str]:
+        return [f"blade{k + 1}" for k in range(self.n_blades)] + ["tower", "nacelle", "hub"]
+
+    def clearance_by_part(self, points: np.ndarray) -> np.ndarray:
+        """Distance (m, >= 0, 0 inside) from each point to each part: shape (M, n_parts), columns
+        in ``part_names()`` order. Never more than the true distance (conservative)."""
+        P = np.atleast_2d(np.asarray(points, dtype=float))
+        cols = [self._blade_distance(P, k) for k in range(self.n_blades)]
+        cols += [self._tower_distance(P), self._nacelle_distance(P), self._hub_distance(P)]
+        return np.stack(cols, axis=1)
+
+    def clearance(self, points: np.ndarray) -> np.ndarray:
+        """Distance (m) from each point to the nearest part of the turbine; (M,) for (M, 3)."""
+        return self.clearance_by_part(points).min(axis=1)
+
+    def segment_clearance(self, p0: np.ndarray, p1: np.ndarray, step: float = 0.5) -> np.ndarray:
+        """A lower bound of the clearance along each straight segment p0[i] -> p1[i].
+
+        Samples every ``step`` metres at most; between samples the distance function (1-Lipschitz)
+        can dip by at most half the sample spacing, which is subtracted.
+        """
+        p0 = np.atleast_2d(np.asarray(p0, dtype=float))
+        p1 = np.atleast_2d(np.asarray(p1, dtype=float))
+        length = np.linalg.norm(p1 - p0, axis=1)
+        n = np.maximum(1, np.ceil(length / step).astype(int))
+        seg = np.repeat(np.arange(len(p0)), n + 1)
+        t = np.concatenate([np.linspace(0.0, 1.0, k + 1) for k in n])
+        pts = p0[seg] + (p1 - p0)[seg] * t[:, None]
+        c = self.clearance(pts)
+        out = np.full(len(p0), np.inf)
+        np.minimum.at(out, seg, c)
+        return out - 0.5 * length / n
+
+    def _hub_distance(self, P: np.ndarray) -> np.ndarray:
+        return np.maximum(np.linalg.norm(P - self.hub_center, axis=1) - self.hub_radius, 0.0)
+
+    def _nacelle_distance(self, P: np.ndarray) -> np.ndarray:
+        a = self.axis
+        side = np.cross(Z, a)
+        q = P - self.nacelle_center
+        local = np.stack([q @ a, q @ side, q @ Z], axis=1)
+        half = np.array([self.nacelle_length, self.nacelle_width, self.nacelle_height]) / 2.0
+        return np.linalg.norm(np.maximum(np.abs(local) - half, 0.0), axis=1)
+
+    def _tower_distance(self, P: np.ndarray) -> np.ndarray:
+        q = P - self.base_xyz
+        rho = np.hypot(q[:, 0], q[:, 1])
+        h = q[:, 2]
+        H, rb, rt = self.tower_height, self.tower_base_radius, self.tower_top_radius
+        # 2-D distance in the (radius, height) half plane to the solid trapezoid.
+        poly = np.array([[0.0, 0.0], [rb, 0.0], [rt, H], [0.0, H]])
+        X = np.stack([rho, h], axis=1)
+        d = np.full(len(P), np.inf)
+        inside = np.ones(len(P), dtype=bool)
+        for i in range(4):
+            a, b = poly[i], poly[(i + 1) % 4]
+            ab = b - a
+            t = np.clip(((X - a) @ ab) / (ab @ ab), 0.0, 1.0)
+            d = np.minimum(d, np.linalg.norm(X - (a + t[:, None] * ab), axis=1))
+            cross = ab[0] * (X[:, 1] - a[1]) - ab[1] * (X[:, 0] - a[0])
+            inside &= cross >= 0  # counter-clockwise polygon
+        return np.where(inside, 0.0, d)
+
+    def _blade_distance(self, P: np.ndarray, k: int) -> np.ndarray:
+        d, c, n = self.blade_frame(k)
+        q = P - self.hub_center
+        s = q @ d
+        s0, s1 = self.blade_root_offset, self.tip_radius
+        f = (np.clip(s, s0, s1) - s0) / (s1 - s0)
+        A, B = self.blade_semi_axes(f)
+        u, v = q @ c, q @ n
+        inplane = _ellipse_distance(u, v, A, B) * self._blade_taper_cos()
+        beyond = np.maximum(s - s1, 0.0) + np.maximum(s0 - s, 0.0)
+        return np.hypot(inplane, beyond)
+
+    # ---- surface samples -------------------------------------------------------------------
+    def surface_samples(self, spacing: float = 0.5, parts: str = "all") -> SurfaceSamples:
+        """Points on the surface with outward normals, area weights and labels.
+
+        ``parts``: "all", "blades" or "structure" (tower, nacelle, hub). Blade samples carry the
+        blade index, the side (index into ``BLADE_SIDES``) and the span fraction.
+        """
+        chunks: list[dict[str, np.ndarray]] = []
+        if parts in ("all", "blades"):
+            for k in range(self.n_blades):
+                chunks.append(self._blade_samples(k, spacing))
+        if parts in ("all", "structure"):
+            chunks.append(self._tower_samples(spacing))
+            chunks.append(self._nacelle_samples(spacing))
+            chunks.append(self._hub_samples(spacing))
+        cat = {key: np.concatenate([ch[key] for ch in chunks]) for key in chunks[0]}
+        return SurfaceSamples(**cat)
+
+    def _blade_samples(self, k: int, spacing: float) -> dict[str, np.ndarray]:
+        d, c, n = self.blade_frame(k)
+        s0, s1 = self.blade_root_offset, self.tip_radius
+        # Start where the blade leaves the hub sphere.
+        s_start = max(s0, math.sqrt(max(self.hub_radius ** 2 - (self.blade_root_chord / 2) ** 2, 0)))
+        ns = max(2, int(math.ceil((s1 - s_start) / spacing)))
+        s = s_start + (np.arange(ns) + 0.5) * (s1 - s_start) / ns
+        f = (s - s0) / (s1 - s0)
+        A, B = self.blade_semi_axes(f)
+        perim = math.pi * (3 * (A + B) - np.sqrt((3 * A + B) * (A + 3 * B)))  # Ramanujan
+        m = max(16, int(math.ceil(perim.max() / spacing)))
+        psi = (np.arange(m) + 0.5) * 2 * math.pi / m
+        S, PSI = np.meshgrid(np.arange(ns), psi, indexing="ij")
+        a_, b_ = A[S], B[S]
+        cu, sv = np.cos(PSI), np.sin(PSI)
+        pts = (self.hub_center + s[S][..., None] * d + (a_ * cu)[..., None] * c
+               + (b_ * sv)[..., None] * n)
+        nu, nv = cu / a_, sv / b_
+        nrm = _unit(nu[..., None] * c + nv[..., None] * n)
+        # Side from the normal's direction in the section: LE +c, pressure +n, TE -c, suction -n.
+        beta = np.degrees(np.arctan2(nv, nu)) % 360.0
+        side = (((beta + 45.0) % 360.0) // 90.0).astype(np.int8)
+        # Arc length element of the ellipse times span step.
+        dl = np.hypot(a_ * np.sin(PSI), b_ * np.cos(PSI)) * (2 * math.pi / m)
+        area = dl * (s1 - s_start) / ns
+        size = ns * m
+        return {
+            "points": pts.reshape(size, 3), "normals": nrm.reshape(size, 3),
+            "area": area.reshape(size), "part": np.full(size, k, np.int16),
+            "blade": np.full(size, k, np.int16), "side": side.reshape(size),
+            "span": np.repeat(f, m),
+        }
+
+    def _tower_samples(self, spacing: float) -> dict[str, np.ndarray]:
+        H, rb, rt = self.tower_height, self.tower_base_radius, self.tower_top_radius
+        nh = max(2, int(math.ceil(H / spacing)))
+        h = (np.arange(nh) + 0.5) * H / nh
+        r = rb + (rt - rb) * h / H
+        m = max(16, int(math.ceil(2 * math.pi * rb / spacing)))
+        ang = (np.arange(m) + 0.5) * 2 * math.pi / m
+        Hh, Aa = np.meshgrid(np.arange(nh), ang, indexing="ij")
+        rr = r[Hh]
+        pts = self.base_xyz + np.stack([rr * np.cos(Aa), rr * np.sin(Aa), h[Hh]], axis=-1)
+        slope = (rb - rt) / H
+        nrm = _unit(np.stack([np.cos(Aa), np.sin(Aa), np.full_like(Aa, slope)], axis=-1))
+        area = rr * (2 * math.pi / m) * (H / nh)
+        return self._structure(pts.reshape(-1, 3), nrm.reshape(-1, 3), area.reshape(-1),
+                               self.n_blades + 0)
+
+    def _nacelle_samples(self, spacing: float) -> dict[str, np.ndarray]:
+        a = self.axis
+        side = np.cross(Z, a)
+        axes = [a, side, Z]
+        half = np.array([self.nacelle_length, self.nacelle_width, self.nacelle_height]) / 2.0
+        pts, nrm, area = [], [], []
+        for i in range(3):
+            j, l = [x for x in range(3) if x != i]
+            nj = max(1, int(math.ceil(2 * half[j] / spacing)))
+            nl = max(1, int(math.ceil(2 * half[l] / spacing)))
+            uj = (np.arange(nj) + 0.5) / nj * 2 - 1
+            ul = (np.arange(nl) + 0.5) / nl * 2 - 1
+            J, L = np.meshgrid(uj, ul, indexing="ij")
+            for sign in (1.0, -1.0):
+                p = (self.nacelle_center + sign * half[i] * axes[i]
+                     + (J * half[j])[..., None] * axes[j] + (L * half[l])[..., None] * axes[l])
+                pts.append(p.reshape(-1, 3))
+                nrm.append(np.tile(sign * axes[i], (nj * nl, 1)))
+                area.append(np.full(nj * nl, 4 * half[j] * half[l] / (nj * nl)))
+        return self._structure(np.concatenate(pts), np.concatenate(nrm), np.concatenate(area),
+                               self.n_blades + 1)
+
+    def _hub_samples(self, spacing: float) -> dict[str, np.ndarray]:
+        r = self.hub_radius
+        n = max(32, int(math.ceil(4 * math.pi * r * r / spacing ** 2)))
+        i = np.arange(n) + 0.5  # Fibonacci sphere: even spread
+        zc = 1 - 2 * i / n
+        ang = math.pi * (1 + 5 ** 0.5) * i
+        rr = np.sqrt(1 - zc * zc)
+        nrm = np.stack([rr * np.cos(ang), rr * np.sin(ang), zc], axis=1)
+        return self._structure(self.hub_center + r * nrm, nrm, np.full(n, 4 * math.pi * r * r / n),
+                               self.n_blades + 2)
+
+    @staticmethod
+    def _structure(pts: np.ndarray, nrm: np.ndarray, area: np.ndarray, part: int) -> dict:
+        n = len(pts)
+        return {"points": pts, "normals": nrm, "area": area, "part": np.full(n, part, np.int16),
+                "blade": np.full(n, -1, np.int16), "side": np.full(n, -1, np.int8),
+                "span": np.full(n, -1.0)}
+
+    # ---- mesh for rendering -----------------------------------------------------------------
+    def mesh(self, around: int = 20, spans: int = 40) -> Mesh:
+        """Triangles for the renderer. ``face_part``: 0..N-1 blades, N tower, N+1 nacelle+hub
+        (the instance classes of segmentation), faces kept small so painter's order works."""
+        V: list[np.ndarray] = []
+        F: list[np.ndarray] = []
+        part: list[np.ndarray] = []
+
+        def add(verts: np.ndarray, faces: np.ndarray, p: int) -> None:
+            off = sum(len(v) for v in V)
+            V.append(verts)
+            F.append(faces + off)
+            part.append(np.full(len(faces), p, np.int16))
+
+        for k in range(self.n_blades):
+            d, c, n = self.blade_frame(k)
+            s0, s1 = self.blade_root_offset, self.tip_radius
+            f = np.concatenate([np.linspace(0, 0.25, spans // 4, endpoint=False),
+                                np.linspace(0.25, 1, spans - spans // 4)])
+            A, B = self.blade_semi_axes(f)
+            s = s0 + f * (s1 - s0)
+            psi = np.arange(around) * 2 * math.pi / around
+            rings = (self.hub_center + s[:, None, None] * d
+                     + (A[:, None] * np.cos(psi))[..., None] * c
+                     + (B[:, None] * np.sin(psi))[..., None] * n)
+            verts = np.concatenate([rings.reshape(-1, 3), [self.hub_center + s1 * d]])
+            add(verts, _tube_faces(len(s), around, cap_end=len(verts) - 1), k)
+
+        # Tower: frustum split into height bands.
+        H, rb, rt = self.tower_height, self.tower_base_radius, self.tower_top_radius
+        bands = 16
+        h = np.linspace(0, H, bands + 1)
+        r = rb + (rt - rb) * h / H
+        ang = np.arange(around * 2) * math.pi / around
+        rings = self.base_xyz + np.stack([r[:, None] * np.cos(ang), r[:, None] * np.sin(ang),
+                                          np.broadcast_to(h[:, None], (bands + 1, len(ang)))], -1)
+        add(rings.reshape(-1, 3), _tube_faces(bands + 1, len(ang), cap_end=None), self.n_blades)
+
+        # Nacelle: box with each face split into a grid; hub: a UV sphere. One instance.
+        add(*_box_mesh(self.nacelle_center, [self.axis, np.cross(Z, self.axis), Z],
+                       np.array([self.nacelle_length, self.nacelle_width, self.nacelle_height]) / 2,
+                       4), self.n_blades + 1)
+        add(*_sphere_mesh(self.hub_center, self.hub_radius, 8, 12), self.n_blades + 1)
+        return Mesh(np.concatenate(V), np.concatenate(F), np.concatenate(part))
+
+    # ---- serialisation ----------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d.pop("_cache", None)
+        d["base"] = list(self.base)
+        d["azimuths_deg"] = list(self.azimuths_deg)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Turbine:
+        known = {k for k in cls.__dataclass_fields__ if not k.startswith("_")}
+        extra = set(d) - known
+        if extra:
+            raise ValueError(f"unknown turbine fields {sorted(extra)}")
+        kw = dict(d)
+        kw["base"] = tuple(kw["base"])
+        kw["azimuths_deg"] = tuple(kw["azimuths_deg"])
+        return cls(**kw)
+
+
+@dataclass(frozen=True)
+class SurfaceSamples:
+    points: np.ndarray  # (M, 3)
+    normals: np.ndarray  # (M, 3) unit, outward
+    area: np.ndarray  # (M,) m^2 each sample stands for
+    part: np.ndarray  # (M,) index into Turbine.part_names()
+    blade: np.ndarray  # (M,) blade index, -1 for tower/nacelle/hub
+    side: np.ndarray  # (M,) index into BLADE_SIDES, -1 off blades
+    span: np.ndarray  # (M,) span fraction 0 root .. 1 tip, -1 off blades
+
+    def __post_init__(self) -> None:
+        m = len(self.points)
+        if self.points.shape != (m, 3) or self.normals.shape != (m, 3):
+            raise ValueError(f"expected points and normals (M, 3), got {self.points.shape}, "
+                             f"{self.normals.shape}")
+        for name in ("area", "part", "blade", "side", "span"):
+            if getattr(self, name).shape != (m,):
+                raise ValueError(f"expected {name} of shape ({m},), got {getattr(self, name).shape}")
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    def __getitem__(self, idx: Any) -> SurfaceSamples:
+        return SurfaceSamples(**{k: getattr(self, k)[idx] for k in self.__dataclass_fields__})
+
+
+@dataclass(frozen=True)
+class Mesh:
+    vertices: np.ndarray  # (V, 3) world
+    faces: np.ndarray  # (F, 3) vertex indices
+    face_part: np.ndarray  # (F,) 0..N-1 blades, N tower, N+1 nacelle (incl. hub)
+
+    def face_normals(self) -> np.ndarray:
+        tri = self.vertices[self.faces]
+        nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        length = np.linalg.norm(nrm, axis=1, keepdims=True)
+        return nrm / np.where(length > 0, length, 1.0)
+
+
+def _ellipse_distance(u: np.ndarray, v: np.ndarray, A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Distance from (u, v) to the solid ellipse (u/A)^2 + (v/B)^2 <= 1, vectorised.
+
+    Closest point x = A^2 u / (t + A^2), y = B^2 v / (t + B^2) where t >= 0 solves
+    (A u / (t + A^2))^2 + (B v / (t + B^2))^2 = 1 (monotone in t): bisection, robust everywhere.
+    """
+    u, v = np.abs(u), np.abs(v)
+    A = np.broadcast_to(A, u.shape).astype(float)
+    B = np.broadcast_to(B, u.shape).astype(float)
+    outside = (u / A) ** 2 + (v / B) ** 2 > 1.0
+    lo = np.zeros_like(u)
+    hi = np.sqrt((A * u) ** 2 + (B * v) ** 2) + 1e-12
+    for _ in range(60):
+        t = 0.5 * (lo + hi)
+        F = (A * u / (t + A * A)) ** 2 + (B * v / (t + B * B)) ** 2 - 1.0
+        pos = F > 0
+        lo = np.where(pos, t, lo)
+        hi = np.where(pos, hi, t)
+    t = 0.5 * (lo + hi)
+    x = A * A * u / (t + A * A)
+    y = B * B * v / (t + B * B)
+    return np.where(outside, np.hypot(u - x, v - y), 0.0)
+
+
+def _tube_faces(rings: int, around: int, cap_end: int | None) -> np.ndarray:
+    faces = []
+    for i in range(rings - 1):
+        for j in range(around):
+            a, b = i * around + j, i * around + (j + 1) % around
+            c_, d_ = a + around, b + around
+            faces += [[a, b, d_], [a, d_, c_]]
+    if cap_end is not None:
+        last = (rings - 1) * around
+        faces += [[last + j, last + (j + 1) % around, cap_end] for j in range(around)]
+    return np.array(faces, dtype=np.int64)
+
+
+def _box_mesh(center: np.ndarray, axes: list[np.ndarray], half: np.ndarray,
+              grid: int) -> tuple[np.ndarray, np.ndarray]:
+    verts, faces = [], []
+    g = np.linspace(-1, 1, grid + 1)
+    for i in range(3):
+        j, l = [x for x in range(3) if x != i]
+        for sign in (1.0, -1.0):
+            J, L = np.meshgrid(g, g, indexing="ij")
+            p = (center + sign * half[i] * axes[i] + (J * half[j])[..., None] * axes[j]
+                 + (L * half[l])[..., None] * axes[l]).reshape(-1, 3)
+            off = sum(len(v) for v in verts)
+            for a in range(grid):
+                for b in range(grid):
+                    v0 = off + a * (grid + 1) + b
+                    faces += [[v0, v0 + 1, v0 + grid + 2], [v0, v0 + grid + 2, v0 + grid + 1]]
+            verts.append(p)
+    return np.concatenate(verts), np.array(faces, dtype=np.int64)
+
+
+def _sphere_mesh(center: np.ndarray, r: float, n_lat: int, n_lon: int) -> tuple[np.ndarray, np.ndarray]:
+    lat = np.linspace(-math.pi / 2, math.pi / 2, n_lat + 1)
+    lon = np.arange(n_lon) * 2 * math.pi / n_lon
+    LA, LO = np.meshgrid(lat, lon, indexing="ij")
+    verts = center + r * np.stack([np.cos(LA) * np.cos(LO), np.cos(LA) * np.sin(LO), np.sin(LA)], -1)
+    return verts.reshape(-1, 3), _tube_faces(n_lat + 1, n_lon, cap_end=None)
