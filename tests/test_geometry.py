@@ -126,3 +126,24 @@ def test_masks_show_each_part_with_occlusion():
     uv, _ = cam.project(t.hub_center - np.array([0, 0, 15.0]) + t.axis * 0.0)
     u, v = np.round(uv[0]).astype(int)
     assert ids[v, u] == 1  # blade 2 (index 1) points down: 150 + 120 = 270
+
+
+def test_coverage_counts_only_the_side_facing_the_camera():
+    from wtcli.geometry.coverage import measure_coverage
+
+    t = make_turbine(az=90, yaw=0)  # blade 1 straight up, leading edge faces the front (+y)
+    cam = Camera(4000, 3000, 16, 23.2)
+    d = cam.distance_for_gsd(1.0)
+    s = t.surface_samples(0.5, parts="blades")
+    # Photos every 2 m up blade 1 from the front at the 1 mm/px distance.
+    zs = np.arange(t.hub_center[2] + 3, t.blade_tips()[0][2], 2.0)
+    pos = np.array([[t.hub_center[0], t.hub_center[1] + d + 0.3, z] for z in zs])
+    R = np.array([Camera.rotation_from_yaw_pitch(180, 0) for _ in zs])  # looking south
+    cov = measure_coverage(s, cam, pos, R, target_gsd_mm=1.0)
+    sides = cov.by_blade_side()["blade1"]
+    assert sides["leading_edge"] > 0.9
+    assert sides["trailing_edge"] == 0.0
+    assert cov.by_blade_side()["blade2"]["leading_edge"] == 0.0
+    # Twice the distance: too coarse, nothing counts.
+    far = measure_coverage(s, cam, pos + np.array([0, d, 0]), R, target_gsd_mm=1.0)
+    assert far.covered.sum() == 0
