@@ -135,9 +135,9 @@ def test_coverage_counts_only_the_side_facing_the_camera():
     cam = Camera(4000, 3000, 16, 23.2)
     d = cam.distance_for_gsd(1.0)
     s = t.surface_samples(0.5, parts="blades")
-    # Photos every 2 m up blade 1 from the front at the 1 mm/px distance.
-    zs = np.arange(t.hub_center[2] + 3, t.blade_tips()[0][2], 2.0)
-    pos = np.array([[t.hub_center[0], t.hub_center[1] + d + 0.3, z] for z in zs])
+    # Photos every 1 m up blade 1 from the front at the 1 mm/px distance.
+    zs = np.arange(t.hub_center[2], t.blade_tips()[0][2] + 2, 1.0)
+    pos = np.array([[t.hub_center[0], t.hub_center[1] + d, z] for z in zs])
     R = np.array([Camera.rotation_from_yaw_pitch(180, 0) for _ in zs])  # looking south
     cov = measure_coverage(s, cam, pos, R, target_gsd_mm=1.0)
     sides = cov.by_blade_side()["blade1"]
