@@ -8,3 +8,52 @@ def test_version(cli):
 
 def test_unknown_command_is_usage_error(cli):
     assert cli("no-such-command").exit_code == 2
+
+
+def _app_with(fn):
+    """A throwaway app with our error boundary and one command that runs ``fn``."""
+    import typer
+
+    from wtcli.cli import _Boundary
+
+    app = typer.Typer(cls=_Boundary)
+
+    @app.callback()
+    def root(ctx: typer.Context, debug: bool = typer.Option(False, "--debug")):
+        ctx.obj = {"debug": debug}
+
+    @app.command()
+    def go():
+        fn()
+
+    return app
+
+
+def test_error_boundary_maps_errors_to_one_line_and_exit_code(runner):
+    from wtcli.errors import ConfigError, ExitCode
+
+    def fail():
+        raise ConfigError("turbines.yaml: turbines[0].hub_height: expected a number > 0, got -1")
+
+    r = runner.invoke(_app_with(fail), ["go"])
+    assert r.exit_code == ExitCode.CONFIG
+    assert r.stdout == ""
+    assert "hub_height" in r.stderr and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+
+
+def test_unexpected_errors_exit_1_with_hint_and_traceback_on_debug(runner):
+    def boom():
+        raise RuntimeError("kaboom")
+
+    r = runner.invoke(_app_with(boom), ["go"])
+    assert r.exit_code == 1 and "--debug" in r.stderr and "Traceback" not in r.stderr
+    r = runner.invoke(_app_with(boom), ["--debug", "go"])
+    assert r.exit_code == 1 and "Traceback" in r.stderr
+
+
+def test_ctrl_c_exits_130(runner):
+    def interrupt():
+        raise KeyboardInterrupt
+
+    assert runner.invoke(_app_with(interrupt), ["go"]).exit_code == 130
