@@ -1,0 +1,52 @@
+"""`wtinspect contours`: instance masks -> filtered contours (paper eq. 4-6). docs/contours.md"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from wtcli.console import err_console
+from wtcli.contours import DEFAULT_AREA_THRESHOLD, contours_batch
+from wtcli.errors import PartialFailure, PerceptionError
+from wtcli.jsonio import dumps, write_json
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("contours")
+    def contours(
+        inputs: List[Path] = typer.Argument(
+            ..., metavar="INPUT...",
+            help="An instances JSON (COCO, from segment/synth; every image in it), or mask PNGs "
+                 "of one image (one binary PNG per instance, or a label PNG: value = instance)."),
+        area_threshold: float = typer.Option(
+            DEFAULT_AREA_THRESHOLD, "--area-threshold", min=0, metavar="PX",
+            help="Eq. 6: keep contours enclosing more than PX pixels."),
+        out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write the contours JSON here."),
+        json_out: bool = typer.Option(False, "--json", help="Print the contours JSON on stdout."),
+    ) -> None:
+        """Binarise instance masks, find their contours and drop small ones (eq. 4-6)."""
+        batch = contours_batch(inputs, area_threshold)
+        doc = batch.to_document()
+        if out is not None:
+            write_json(out, doc)
+        if json_out:
+            typer.echo(dumps(doc))
+        elif out is None:
+            for cs, err, img in zip(batch.sets, batch.errors, batch.images):
+                name = img.get("file_name") or img.get("id", "?")
+                if cs is None:
+                    typer.echo(f"{name}: error: {err}")
+                    continue
+                counts = {lab: int((cs.labels == lab).sum()) for lab in ("blade", "tower", "nacelle")}
+                typer.echo(f"{name}: " + ", ".join(f"{n} {lab}" for lab, n in counts.items())
+                           + f" (dropped {cs.dropped} contour(s) <= {cs.area_threshold:g} px)")
+        n, bad = len(batch.sets), batch.n_failed
+        if out is not None:
+            err_console.print(f"contours of {n - bad}/{n} image(s) -> {out}")
+        if bad:
+            if n == 1:
+                raise PerceptionError(batch.errors[0])
+            raise PartialFailure(f"{bad} of {n} images failed (see the 'error' entries"
+                                 + (f" in {out})" if out else ")"))

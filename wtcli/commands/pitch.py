@@ -1,0 +1,85 @@
+"""`wtinspect pitch`: blade contours -> θ (eq. 7), class, direction φ, overlay. docs/pitch.md"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import cv2
+import typer
+
+from wtcli.console import err_console
+from wtcli.errors import InputError, PartialFailure, PerceptionError
+from wtcli.jsonio import atomic_write_bytes, dumps, write_json
+from wtcli.pitch import (draw_pitch_overlay, load_pitch_input, overlay_background, pitch_batch)
+
+
+def _overlay_name(img: dict, k: int) -> str:
+    stem = Path(str(img.get("file_name") or f"image{img.get('id', k)}")).stem
+    return f"{stem}_pitch.png"
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("pitch")
+    def pitch(
+        inputs: List[Path] = typer.Argument(
+            ..., metavar="INPUT...",
+            help="A contours JSON (from `contours`), an instances JSON (COCO, every image in it), "
+                 "or mask PNGs of one image (one binary PNG per instance, or a label PNG)."),
+        area_threshold: Optional[float] = typer.Option(
+            None, "--area-threshold", min=0, metavar="PX",
+            help="Eq. 6 threshold in pixels (default 100; a contours JSON keeps its own)."),
+        blades: int = typer.Option(3, "--blades", min=0,
+                                   help="Expected blades per image; 0 accepts any count."),
+        out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write the pitch JSON here."),
+        overlay_dir: Optional[Path] = typer.Option(
+            None, "--overlay-dir", help="Write one PNG per image with each blade's axis, θ, "
+                                        "class and φ drawn on it."),
+        image: Optional[Path] = typer.Option(
+            None, "--image", help="Background photo for the overlay (one image only); default: "
+                                  "the image's file_name next to the instances JSON, else the masks."),
+        json_out: bool = typer.Option(False, "--json", help="Print the pitch JSON on stdout."),
+    ) -> None:
+        """Measure each blade's angle θ, its class and its direction φ hub -> tip (eq. 7)."""
+        loaded = load_pitch_input(inputs, area_threshold)
+        if image is not None and len(loaded) != 1:
+            raise InputError(f"--image needs an input with one image, got {len(loaded)}")
+        batch = pitch_batch(loaded, blades or None, source=str(inputs[0]))
+        overlays: list[Optional[str]] | None = None
+        if overlay_dir is not None:
+            overlays = []
+            for k, (res, inp) in enumerate(zip(batch.results, batch.inputs)):
+                if res is None:
+                    overlays.append(None)
+                    continue
+                bg, note = overlay_background(inp, image)
+                if note:
+                    err_console.print(f"note: {note}")
+                ok, png = cv2.imencode(".png", draw_pitch_overlay(bg, res))
+                path = overlay_dir / _overlay_name(inp.image, k)
+                atomic_write_bytes(path, png.tobytes())
+                overlays.append(str(path))
+        doc = batch.to_document(overlays)
+        if out is not None:
+            write_json(out, doc)
+        if json_out:
+            typer.echo(dumps(doc))
+        elif out is None:
+            for res, err, inp in zip(batch.results, batch.errors, batch.inputs):
+                name = inp.image.get("file_name") or inp.image.get("id", "?")
+                if res is None:
+                    typer.echo(f"{name}: error: {err}")
+                    continue
+                for k, b in enumerate(res.blades):
+                    typer.echo(f"{name}: blade {k + 1}: theta {b.theta_deg:7.2f}  "
+                               f"{b.theta_class:<10}  phi {b.phi_deg:7.2f}  "
+                               f"(eq. 7 minAreaRect {b.theta_eq7_deg:.2f})")
+        n, bad = len(batch.results), batch.n_failed
+        if out is not None or overlay_dir is not None:
+            where = ", ".join(str(p) for p in (out, overlay_dir) if p is not None)
+            err_console.print(f"pitch of {n - bad}/{n} image(s) -> {where}")
+        if bad:
+            if n == 1:
+                raise PerceptionError(batch.errors[0])
+            raise PartialFailure(f"{bad} of {n} images failed (see the 'error' entries"
+                                 + (f" in {out})" if out else ")"))

@@ -1,0 +1,669 @@
+"""Step 1.4 of the paper: each blade's angle θ (eq. 7), its class, and its direction φ hub -> tip.
+
+Angles (DESIGN.md): pixels are x right, y down, but every reported angle is counter-clockwise
+positive with image y pointing UP, 0° = pointing right. θ ∈ [0, 180) is the blade's axis (no
+direction); φ ∈ [0, 360) is the direction from the hub-side end to the tip.
+
+Two θ per blade:
+
+* ``theta_eq7_deg`` — the paper's eq. 7 on ``cv2.minAreaRect``: the line through the "top" and
+  "bottom" points of the rectangle, i.e. the midpoints of its two short sides. We normalise the
+  rectangle ourselves from ``cv2.boxPoints`` (long side, atan2 with y up); the angle
+  ``minAreaRect`` returns is never used (its range changed across OpenCV releases).
+* ``theta_deg`` — the blade's principal axis (second moments of its filled region). A blade is
+  wide at the root and narrow at the tip, so the minimum-area rectangle often lies along one
+  edge of the taper and eq. 7 tilts by 1-2°; the principal axis of the (symmetric) silhouette
+  does not. ``theta_deg`` is the one classified and the one φ follows (benchmarks/pitch_accuracy.py).
+
+Classes (DESIGN.md, the paper's Fig. 4): horizontal [0, 30] ∪ [150, 180), acute (30, 60] ∪
+[120, 150), vertical (60, 120). θ is rounded to 6 decimals (as written to the file) before it is
+classified, so the class in a file always agrees with the θ next to it.
+
+The hub: the nacelle/hub instance's pixels near the blades' convergence point if there is a
+nacelle, else the convergence point (least-squares intersection of the blade axes), else the
+blades' common end, else (one blade alone) the blade's wider end (blades taper to the tip).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from wtcli.contours import (CONTOURS_SCHEMA, DEFAULT_AREA_THRESHOLD, MASK_SUFFIXES, ContourSet,
+                            InstanceContours, find_contours, instances_from_mask_files,
+                            read_contours, require_contours)
+from wtcli.errors import ConfigError, InputError, PerceptionError
+from wtcli.jsonio import document, read_json
+from wtcli.masks import Instances, read_instances
+
+PITCH_SCHEMA = "wtinspect.pitch"
+PITCH_VERSION = 1
+HORIZONTAL, ACUTE, VERTICAL = "horizontal", "acute", "vertical"
+CLASSES = (HORIZONTAL, ACUTE, VERTICAL)
+CLASS_INTERVALS = {HORIZONTAL: "[0, 30] U [150, 180)", ACUTE: "(30, 60] U [120, 150)",
+                   VERTICAL: "(60, 120)"}
+ANGLE_DIGITS = 6
+THETA_SOURCE = "principal_axis"
+PHOTO_SUFFIXES = (".jpg", ".jpeg", ".webp")
+
+
+# ---- angles and classes ------------------------------------------------------------------------
+def normalize_angle(deg: float, period: float) -> float:
+    """``deg`` in [0, period), rounded to the file's 6 decimals (so 179.9999999 -> 0)."""
+    a = round(float(deg) % period, ANGLE_DIGITS)
+    return 0.0 if a >= period or a == 0 else a
+
+
+def normalize_theta(deg: float) -> float:
+    return normalize_angle(deg, 180.0)
+
+
+def normalize_phi(deg: float) -> float:
+    return normalize_angle(deg, 360.0)
+
+
+def classify_theta(theta_deg: float) -> str:
+    """The paper's class of an axis angle: horizontal [0,30] ∪ [150,180), acute (30,60] ∪
+    [120,150), vertical (60,120). Angles outside [0, 180) are wrapped first."""
+    if not math.isfinite(theta_deg):
+        raise ValueError(f"expected a finite angle, got {theta_deg}")
+    t = normalize_theta(theta_deg)
+    if t <= 30.0 or t >= 150.0:
+        return HORIZONTAL
+    if t <= 60.0 or t >= 120.0:
+        return ACUTE
+    return VERTICAL
+
+
+def image_angle(dx: float, dy_image: float) -> float:
+    """Direction of the image vector (dx, dy) (pixels, y down) in degrees, y up, CCW, [0, 360)."""
+    return math.degrees(math.atan2(-dy_image, dx)) % 360.0
+
+
+# ---- eq. 7 on minAreaRect ----------------------------------------------------------------------
+@dataclass(frozen=True)
+class BladeRect:
+    """``cv2.minAreaRect`` normalised by us: length >= width, angle = eq. 7's θ in [0, 180)."""
+
+    center: tuple[float, float]  # px
+    length: float  # px, the long side
+    width: float  # px, the short side
+    angle_deg: float  # eq. 7
+    top: tuple[float, float]  # midpoint of the short side with the smaller image y
+    bottom: tuple[float, float]
+    corners: np.ndarray = field(repr=False, compare=False, default=None)  # (4, 2) boxPoints
+
+
+def rect_eq7(points: np.ndarray) -> BladeRect:
+    """Minimum-area rectangle of the points and the paper's eq. 7:
+
+        θ = arctan((y_bottom − y_top) / (x_bottom − x_top))
+
+    with y measured upwards (atan2, so a vertical blade needs no division by zero), where top
+    and bottom are the midpoints of the rectangle's short sides (the blade's two ends)."""
+    pts = np.asarray(points, np.float32).reshape(-1, 2)
+    rect = cv2.minAreaRect(pts)
+    box = cv2.boxPoints(rect).astype(float)  # 4 corners in order around the rectangle
+    e01 = np.linalg.norm(box[1] - box[0])
+    e12 = np.linalg.norm(box[2] - box[1])
+    if e01 >= e12:  # sides 0-1 and 2-3 are long: the ends are the short sides 1-2 and 3-0
+        ends = [(box[1] + box[2]) / 2, (box[3] + box[0]) / 2]
+        length, width = e01, e12
+    else:
+        ends = [(box[0] + box[1]) / 2, (box[2] + box[3]) / 2]
+        length, width = e12, e01
+    top, bottom = sorted(ends, key=lambda p: (p[1], p[0]))  # image y down: top has smaller y
+    x_top, y_top = top[0], -top[1]  # y up
+    x_bottom, y_bottom = bottom[0], -bottom[1]
+    theta = math.degrees(math.atan2(y_bottom - y_top, x_bottom - x_top))  # eq. 7
+    center = (float(box[:, 0].mean()), float(box[:, 1].mean()))
+    return BladeRect(center, float(length), float(width), normalize_theta(theta),
+                     (float(top[0]), float(top[1])), (float(bottom[0]), float(bottom[1])), box)
+
+
+# ---- principal axis -----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Axis:
+    centroid: tuple[float, float]  # px
+    theta_deg: float  # [0, 180), y up
+    elongation: float  # sqrt(major / minor second moment); 1 for a disc
+    t_min: float  # extent of the region along the axis from the centroid, px (image direction)
+    t_max: float
+
+    @property
+    def direction(self) -> np.ndarray:
+        """Unit vector of θ in image coordinates (x right, y down)."""
+        r = math.radians(self.theta_deg)
+        return np.array([math.cos(r), -math.sin(r)])
+
+    def point(self, t: float) -> np.ndarray:
+        return np.asarray(self.centroid) + t * self.direction
+
+
+def principal_axis(inst: InstanceContours) -> Axis:
+    """Centroid and major axis of the filled region (pixel second moments)."""
+    region = inst.fill().astype(np.uint8)
+    x0, y0, _, _ = inst.bbox
+    m = cv2.moments(region, binaryImage=True)
+    if m["m00"] <= 0:
+        raise PerceptionError(f"{inst.label} {inst.source_index} has an empty region")
+    cx, cy = m["m10"] / m["m00"] + x0, m["m01"] / m["m00"] + y0
+    mu20, mu02, mu11 = m["mu20"], m["mu02"], m["mu11"]
+    theta = normalize_theta(math.degrees(0.5 * math.atan2(-2.0 * mu11, mu20 - mu02)))
+    common = math.sqrt(4 * mu11 * mu11 + (mu20 - mu02) ** 2)
+    lam1, lam2 = (mu20 + mu02 + common) / 2, (mu20 + mu02 - common) / 2
+    elong = math.sqrt(lam1 / lam2) if lam2 > 1e-9 else float("inf")
+    r = math.radians(theta)
+    u = np.array([math.cos(r), -math.sin(r)])
+    ys, xs = np.nonzero(region)
+    # Pixel corners, not centres: the region reaches half a pixel beyond its centres.
+    t = (xs + x0 - cx) * u[0] + (ys + y0 - cy) * u[1]
+    half = 0.5 * (abs(u[0]) + abs(u[1]))
+    return Axis((float(cx), float(cy)), theta, float(min(elong, 1e6)),
+                float(t.min() - half), float(t.max() + half))
+
+
+# ---- the hub -------------------------------------------------------------------------------------
+def axes_convergence(axes: list[Axis], lengths: list[float]) -> np.ndarray | None:
+    """Least-squares intersection of the blade axes (weighted by length); None if the axes are
+    (nearly) parallel or the point is far from the blades' ends."""
+    if len(axes) < 2:
+        return None
+    A = np.zeros((2, 2))
+    b = np.zeros(2)
+    for ax, w in zip(axes, lengths):
+        u = ax.direction
+        P = np.eye(2) - np.outer(u, u)
+        A += w * P
+        b += w * P @ np.asarray(ax.centroid)
+    ev = np.linalg.eigvalsh(A)
+    if ev[0] <= 0.01 * ev[1]:
+        return None
+    hub = np.linalg.solve(A, b)
+    # It must be near one end of most blades (not far beyond them): ratio to blade length.
+    near = [min(abs(ax.t_min - (hub - ax.centroid) @ ax.direction),
+                abs(ax.t_max - (hub - ax.centroid) @ ax.direction)) / max(L, 1e-9)
+            for ax, L in zip(axes, lengths)]
+    if float(np.median(near)) > 0.5:
+        return None
+    return hub
+
+
+def common_end(axes: list[Axis]) -> np.ndarray:
+    """The blades' common end: for each blade the end closest to any other blade's ends."""
+    ends = [(ax.point(ax.t_min), ax.point(ax.t_max)) for ax in axes]
+    chosen = []
+    for i, (a, b) in enumerate(ends):
+        others = [p for j, e in enumerate(ends) if j != i for p in e]
+        da = min(np.linalg.norm(a - p) for p in others)
+        db = min(np.linalg.norm(b - p) for p in others)
+        chosen.append(a if da <= db else b)
+    return np.mean(chosen, axis=0)
+
+
+def wider_end(inst: InstanceContours, ax: Axis) -> np.ndarray:
+    """One blade alone: the end whose last quarter holds more pixels (root wider than tip)."""
+    region = inst.fill()
+    x0, y0, _, _ = inst.bbox
+    ys, xs = np.nonzero(region)
+    u = ax.direction
+    t = (xs + x0 - ax.centroid[0]) * u[0] + (ys + y0 - ax.centroid[1]) * u[1]
+    q = 0.25 * (ax.t_max - ax.t_min)
+    n_low = int((t < ax.t_min + q).sum())
+    n_high = int((t > ax.t_max - q).sum())
+    return ax.point(ax.t_min if n_low >= n_high else ax.t_max)
+
+
+def nacelle_hub(nacelles: ContourSet, near: np.ndarray | None) -> np.ndarray | None:
+    """Centroid of the nacelle/hub pixels near the blades' convergence point (or of the largest
+    nacelle region when there is no convergence point)."""
+    if len(nacelles) == 0:
+        return None
+    best, best_d = None, math.inf
+    for inst in nacelles:
+        region = inst.fill()
+        x0, y0, _, _ = inst.bbox
+        ys, xs = np.nonzero(region)
+        pts = np.stack([xs + x0, ys + y0], 1).astype(float)
+        if near is None:
+            d = -len(pts)  # the largest
+            sel = pts
+        else:
+            dist = np.linalg.norm(pts - near, axis=1)
+            d = float(dist.min())
+            rho = math.sqrt(len(pts) / math.pi)  # the region's equivalent radius
+            sel = pts[dist <= max(rho, d + 1.0)]
+        if d < best_d:
+            best, best_d = sel.mean(axis=0), d
+    if near is not None and best is not None:
+        # A nacelle far from where the blades meet is not this rotor's hub.
+        if np.linalg.norm(best - near) > 0.25 * max(nacelles.image_size):
+            return None
+    return best
+
+
+# ---- typed result --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class BladePitch:
+    source_index: int  # the blade's index in its image's instances
+    score: float
+    area: int  # px
+    theta_deg: float  # principal axis, [0, 180): the θ that is classified
+    theta_class: str
+    theta_eq7_deg: float  # eq. 7 on minAreaRect, [0, 180)
+    phi_deg: float  # hub -> tip, [0, 360)
+    rect: BladeRect
+    root_px: tuple[float, float]  # hub-side end of the blade's axis
+    tip_px: tuple[float, float]  # far end
+    centroid_px: tuple[float, float]
+    elongation: float
+
+    def __post_init__(self) -> None:
+        for name, period in (("theta_deg", 180.0), ("theta_eq7_deg", 180.0), ("phi_deg", 360.0)):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and 0.0 <= v < period):
+                raise ValueError(f"expected {name} in [0, {period:g}), got {v}")
+        if self.theta_class != classify_theta(self.theta_deg):
+            raise ValueError(f"expected class {classify_theta(self.theta_deg)!r} for θ "
+                             f"{self.theta_deg}, got {self.theta_class!r}")
+        d = (self.phi_deg - self.theta_deg) % 180.0
+        if min(d, 180.0 - d) > 1e-4:
+            raise ValueError(f"expected φ ({self.phi_deg}) = θ ({self.theta_deg}) or θ + 180")
+
+    def to_dict(self) -> dict[str, Any]:
+        r = self.rect
+        return {"source_index": self.source_index, "score": self.score, "area": self.area,
+                "theta_deg": self.theta_deg, "theta_class": self.theta_class,
+                "theta_eq7_deg": self.theta_eq7_deg, "phi_deg": self.phi_deg,
+                "rect": {"center": list(r.center), "size": [r.length, r.width],
+                         "angle_deg": r.angle_deg, "top": list(r.top), "bottom": list(r.bottom)},
+                "root_px": list(self.root_px), "tip_px": list(self.tip_px),
+                "centroid_px": list(self.centroid_px), "elongation": self.elongation}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> BladePitch:
+        r = d["rect"]
+        rect = BladeRect(tuple(r["center"]), float(r["size"][0]), float(r["size"][1]),
+                         float(r["angle_deg"]), tuple(r["top"]), tuple(r["bottom"]))
+        return cls(int(d["source_index"]), float(d["score"]), int(d["area"]),
+                   float(d["theta_deg"]), str(d["theta_class"]), float(d["theta_eq7_deg"]),
+                   float(d["phi_deg"]), rect, tuple(d["root_px"]), tuple(d["tip_px"]),
+                   tuple(d["centroid_px"]), float(d["elongation"]))
+
+
+@dataclass(frozen=True)
+class PitchResult:
+    blades: tuple[BladePitch, ...]
+    hub_px: tuple[float, float]
+    hub_source: str  # nacelle | blade_axes | common_end | blade_taper
+    image_size: tuple[int, int]  # (H, W)
+    image: dict = field(default_factory=dict)
+    source: str = ""
+    area_threshold: float = DEFAULT_AREA_THRESHOLD
+    axes_convergence_px: tuple[float, float] | None = None
+    contours: ContourSet | None = field(default=None, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if not self.blades:
+            raise ValueError("expected at least one blade")
+        if self.hub_source not in ("nacelle", "blade_axes", "common_end", "blade_taper"):
+            raise ValueError(f"unknown hub_source {self.hub_source!r}")
+        object.__setattr__(self, "blades", tuple(self.blades))
+        object.__setattr__(self, "image_size", tuple(int(v) for v in self.image_size))
+
+    def __len__(self) -> int:
+        return len(self.blades)
+
+    @property
+    def thetas(self) -> np.ndarray:
+        return np.array([b.theta_deg for b in self.blades])
+
+    @property
+    def phis(self) -> np.ndarray:
+        return np.array([b.phi_deg for b in self.blades])
+
+    @property
+    def classes(self) -> list[str]:
+        return [b.theta_class for b in self.blades]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"image": self.image, "image_size": list(self.image_size),
+                "area_threshold": self.area_threshold, "n_blades": len(self.blades),
+                "hub_px": list(self.hub_px), "hub_source": self.hub_source,
+                "axes_convergence_px": (None if self.axes_convergence_px is None
+                                        else list(self.axes_convergence_px)),
+                "blades": [b.to_dict() for b in self.blades]}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], source: str = "") -> PitchResult:
+        conv = d.get("axes_convergence_px")
+        return cls(tuple(BladePitch.from_dict(b) for b in d["blades"]), tuple(d["hub_px"]),
+                   d["hub_source"], tuple(d["image_size"]), d.get("image") or {}, source,
+                   float(d.get("area_threshold", DEFAULT_AREA_THRESHOLD)),
+                   None if conv is None else tuple(conv))
+
+
+# ---- measuring -----------------------------------------------------------------------------------
+def check_blade_count(n: int, expected: int | None, where: str, dropped: int = 0) -> None:
+    if n == 0:
+        extra = f" ({dropped} contour(s) below the area threshold)" if dropped else ""
+        raise PerceptionError(f"no blade found in {where}{extra}")
+    if expected and n != expected:
+        raise PerceptionError(f"found {n} blade{'s' if n != 1 else ''} in {where}, expected "
+                              f"{expected} (--blades 0 accepts any count)")
+
+
+def measure_pitch(contours: ContourSet, expected_blades: int | None = 3) -> PitchResult:
+    """θ (eq. 7 and principal axis), class and φ of every blade in one image's contours.
+
+    ``expected_blades``: raise PerceptionError unless exactly this many blades are found
+    (None or 0: any count >= 1)."""
+    if expected_blades is not None and expected_blades < 0:
+        raise ValueError(f"expected_blades must be >= 0, got {expected_blades}")
+    blades = contours.of("blade")
+    check_blade_count(len(blades), expected_blades, contours.name, contours.dropped)
+    rects = [rect_eq7(b.points) for b in blades]
+    axes = [principal_axis(b) for b in blades]
+    lengths = [ax.t_max - ax.t_min for ax in axes]
+
+    conv = axes_convergence(axes, lengths)
+    hub = nacelle_hub(contours.of("nacelle"), conv)
+    if hub is not None:
+        source = "nacelle"
+    elif conv is not None:
+        hub, source = conv, "blade_axes"
+    elif len(axes) >= 2:
+        hub, source = common_end(axes), "common_end"
+    else:
+        hub, source = wider_end(blades.instances[0], axes[0]), "blade_taper"
+
+    out = []
+    for inst, rect, ax in zip(blades, rects, axes):
+        a, b = ax.point(ax.t_min), ax.point(ax.t_max)
+        root, tip = (a, b) if np.linalg.norm(a - hub) <= np.linalg.norm(b - hub) else (b, a)
+        # φ follows the principal axis; hub decides which way along it the tip lies.
+        u = ax.direction
+        phi = ax.theta_deg if (tip - root) @ u > 0 else ax.theta_deg + 180.0
+        out.append(BladePitch(
+            inst.source_index, inst.score, inst.area, ax.theta_deg, classify_theta(ax.theta_deg),
+            rect.angle_deg, normalize_phi(phi), rect, (float(root[0]), float(root[1])),
+            (float(tip[0]), float(tip[1])), ax.centroid, ax.elongation))
+    return PitchResult(tuple(out), (float(hub[0]), float(hub[1])), source, contours.image_size,
+                       contours.image, contours.source, contours.area_threshold,
+                       None if conv is None else (float(conv[0]), float(conv[1])), contours)
+
+
+def pitch_from_instances(instances: Instances, area_threshold: float = DEFAULT_AREA_THRESHOLD,
+                         expected_blades: int | None = 3, image: dict | None = None,
+                         source: str = "") -> PitchResult:
+    """Eq. 4-7 in one call: instances of one image -> contours -> pitch."""
+    cs = require_contours(find_contours(instances, area_threshold, image=image, source=source))
+    return measure_pitch(cs, expected_blades)
+
+
+# ---- inputs of the pitch command -------------------------------------------------------------------
+@dataclass(frozen=True)
+class PitchInput:
+    """One image to measure: its contours (or the error that stopped them) and where its photo
+    may be found for the overlay background."""
+
+    contours: ContourSet | None
+    error: str | None
+    image: dict
+    background_candidates: tuple[Path, ...] = ()
+
+
+def _image_candidates(file_name: str | None, *dirs: Path) -> tuple[Path, ...]:
+    if not file_name:
+        return ()
+    out = []
+    for d in dirs:
+        p = d / file_name
+        if p not in out:
+            out.append(p)
+    return tuple(out)
+
+
+def load_pitch_input(paths: list[Path], area_threshold: float | None = None) -> list[PitchInput]:
+    """INPUT of ``pitch``, dispatched on its type: a contours JSON, an instances JSON (contours
+    found here), or mask PNG(s) of one image. A photo is refused for now (segment it first)."""
+    paths = [Path(p) for p in paths]
+    if not paths:
+        raise InputError("no input given")
+    thr = DEFAULT_AREA_THRESHOLD if area_threshold is None else float(area_threshold)
+    if thr < 0 or not math.isfinite(thr):
+        raise ConfigError(f"--area-threshold must be >= 0, got {area_threshold}")
+    first = paths[0]
+    if len(paths) == 1 and first.suffix.lower() == ".json":
+        doc = read_json(first)
+        if isinstance(doc, dict) and doc.get("schema") == CONTOURS_SCHEMA:
+            return _from_contours_file(first, area_threshold)
+        out = []
+        for img, inst in read_instances(first):
+            cands = _image_candidates(img.get("file_name"), first.parent)
+            try:
+                cs = require_contours(find_contours(inst, thr, image=img, source=str(first)))
+                out.append(PitchInput(cs, None, img, cands))
+            except PerceptionError as e:
+                out.append(PitchInput(None, str(e), img, cands))
+        if not out:
+            raise InputError(f"{first}: no images in the instances file")
+        return out
+    if any(p.suffix.lower() in PHOTO_SUFFIXES for p in paths):
+        photo = next(p for p in paths if p.suffix.lower() in PHOTO_SUFFIXES)
+        raise InputError(f"{photo}: a photo; pitch reads masks, contours or instances "
+                         "(run `wtinspect segment` on it first)")
+    if all(p.suffix.lower() in MASK_SUFFIXES for p in paths):
+        rec, inst = instances_from_mask_files(paths)
+        try:
+            cs = require_contours(find_contours(inst, thr, image=rec, source=str(first)))
+            return [PitchInput(cs, None, rec)]
+        except PerceptionError as e:
+            return [PitchInput(None, str(e), rec)]
+    bad = next(p for p in paths if p.suffix.lower() not in MASK_SUFFIXES)
+    raise InputError(f"{bad}: expected a contours or instances JSON, or mask PNG files")
+
+
+def _from_contours_file(path: Path, area_threshold: float | None) -> list[PitchInput]:
+    out = []
+    doc_source = read_json(path).get("source", "")
+    src_dir = Path(doc_source).parent if doc_source else Path(".")
+    for cs, err, img in read_contours(path):
+        cands = _image_candidates(img.get("file_name"), src_dir, path.parent / src_dir, path.parent)
+        if cs is not None and area_threshold is not None:
+            if area_threshold < cs.area_threshold:
+                raise ConfigError(f"{path} was filtered at {cs.area_threshold:g} px; a lower "
+                                  f"--area-threshold ({area_threshold:g}) needs `wtinspect "
+                                  "contours` again")
+            cs = _refilter(cs, area_threshold)
+            try:
+                require_contours(cs)
+            except PerceptionError as e:
+                cs, err = None, str(e)
+        out.append(PitchInput(cs, err, img, cands))
+    if not out:
+        raise InputError(f"{path}: no images in the contours file")
+    return out
+
+
+def _refilter(cs: ContourSet, threshold: float) -> ContourSet:
+    kept, dropped, largest = [], cs.dropped, cs.largest_dropped_area
+    for inst in cs:
+        keep = [(c, a) for c, a in zip(inst.contours, inst.areas) if a > threshold]
+        for a in inst.areas:
+            if a <= threshold:
+                dropped += 1
+                largest = max(largest, a)
+        if keep:
+            kept.append(InstanceContours(inst.label, inst.score, inst.source_index,
+                                         tuple(c for c, _ in keep), tuple(a for _, a in keep)))
+    return ContourSet(tuple(kept), cs.image_size, threshold, cs.image, cs.source, dropped, largest)
+
+
+# ---- batch ---------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PitchBatch:
+    results: tuple[PitchResult | None, ...]
+    errors: tuple[str | None, ...]
+    inputs: tuple[PitchInput, ...]
+    source: str
+    expected_blades: int | None
+
+    @property
+    def n_failed(self) -> int:
+        return sum(e is not None for e in self.errors)
+
+    def to_document(self, overlays: list[str | None] | None = None) -> dict[str, Any]:
+        items = []
+        for k, (res, err, inp) in enumerate(zip(self.results, self.errors, self.inputs)):
+            item = ({"image": inp.image, "error": err} if res is None
+                    else {**res.to_dict(), "error": None})
+            if overlays is not None:
+                item["overlay"] = overlays[k]
+            items.append(item)
+        return document(PITCH_SCHEMA, PITCH_VERSION, {
+            "source": self.source, "expected_blades": self.expected_blades or 0,
+            "theta_source": THETA_SOURCE, "angle_convention":
+                "degrees, counter-clockwise, image y up, 0 = right; theta in [0, 180), "
+                "phi hub->tip in [0, 360)",
+            "classes": CLASS_INTERVALS, "images": items})
+
+
+def pitch_batch(inputs: list[PitchInput], expected_blades: int | None = 3,
+                source: str = "") -> PitchBatch:
+    """``measure_pitch`` on every input image; per-image errors are recorded, not raised."""
+    results, errors = [], []
+    for inp in inputs:
+        if inp.contours is None:
+            results.append(None)
+            errors.append(inp.error or "no contours")
+            continue
+        try:
+            results.append(measure_pitch(inp.contours, expected_blades))
+            errors.append(None)
+        except PerceptionError as e:
+            results.append(None)
+            errors.append(str(e))
+    return PitchBatch(tuple(results), tuple(errors), tuple(inputs), source, expected_blades)
+
+
+def read_pitch(path: str | Path) -> list[tuple[PitchResult | None, str | None, dict]]:
+    """Read a ``wtinspect.pitch`` file: (result or None, error or None, image record) per image."""
+    path = Path(path)
+    doc = read_json(path, PITCH_SCHEMA, PITCH_VERSION)
+    out = []
+    for i, d in enumerate(doc.get("images") or []):
+        img = d.get("image") or {}
+        if d.get("error"):
+            out.append((None, str(d["error"]), img))
+            continue
+        try:
+            out.append((PitchResult.from_dict(d, source=str(path)), None, img))
+        except (KeyError, TypeError, ValueError) as e:
+            raise InputError(f"{path}: images[{i}]: bad pitch entry ({e})") from None
+    return out
+
+
+# ---- overlay ---------------------------------------------------------------------------------------
+CLASS_COLORS_BGR = {HORIZONTAL: (80, 200, 40), ACUTE: (0, 165, 255), VERTICAL: (230, 60, 230)}
+_PART_GREY = {"blade": 90, "tower": 55, "nacelle": 120}
+
+
+def mask_canvas(result: PitchResult) -> np.ndarray:
+    """A black BGR canvas with every instance's region in grey (when there is no photo)."""
+    h, w = result.image_size
+    canvas = np.zeros((h, w, 3), np.uint8)
+    if result.contours is not None:
+        for inst in result.contours:
+            g = _PART_GREY.get(inst.label, 80)
+            cv2.drawContours(canvas, [c.reshape(-1, 1, 2) for c in inst.contours], -1,
+                             (g, g, g), thickness=cv2.FILLED)
+    return canvas
+
+
+def _text(img: np.ndarray, s: str, org: tuple[int, int], scale: float, color, thick: int) -> None:
+    for dx, dy in ((-1, -1), (-1, 1), (1, -1), (1, 1)):  # a dark outline, same glyph widths
+        cv2.putText(img, s, (org[0] + dx, org[1] + dy), cv2.FONT_HERSHEY_SIMPLEX, scale,
+                    (0, 0, 0), thick, cv2.LINE_AA)
+    cv2.putText(img, s, org, cv2.FONT_HERSHEY_SIMPLEX, scale, color, thick, cv2.LINE_AA)
+
+
+def draw_pitch_overlay(image_bgr: np.ndarray | None, result: PitchResult) -> np.ndarray:
+    """Each blade's contour, eq. 7 rectangle, axis (arrow hub -> tip), θ, class and φ on a copy
+    of the image (BGR, same size as the masks), or on ``mask_canvas`` when ``image_bgr`` is None."""
+    h, w = result.image_size
+    if image_bgr is None:
+        img = mask_canvas(result)
+    else:
+        img = np.ascontiguousarray(image_bgr[:, :, :3] if image_bgr.ndim == 3
+                                   else cv2.cvtColor(image_bgr, cv2.COLOR_GRAY2BGR)).copy()
+        if img.shape[:2] != (h, w):
+            raise ValueError(f"expected an image of {w}x{h}, got {img.shape[1]}x{img.shape[0]}")
+    s = max(h, w) / 1000.0
+    thick = max(1, round(2 * s))
+    scale = max(0.4, 0.6 * s)
+    blades_contours = {}
+    if result.contours is not None:
+        blades_contours = {i.source_index: i for i in result.contours.of("blade")}
+    for k, b in enumerate(result.blades):
+        color = CLASS_COLORS_BGR[b.theta_class]
+        inst = blades_contours.get(b.source_index)
+        if inst is not None:
+            cv2.drawContours(img, [c.reshape(-1, 1, 2) for c in inst.contours], -1, color,
+                             max(1, thick // 2), cv2.LINE_AA)
+        if b.rect.corners is not None:
+            cv2.polylines(img, [np.round(b.rect.corners).astype(np.int32).reshape(-1, 1, 2)],
+                          True, (200, 200, 200), 1, cv2.LINE_AA)
+        root = tuple(int(round(v)) for v in b.root_px)
+        tip = tuple(int(round(v)) for v in b.tip_px)
+        length = max(1.0, math.dist(root, tip))
+        cv2.arrowedLine(img, root, tip, color, thick + 1, cv2.LINE_AA,
+                        tipLength=min(0.2, 30 * s / length))
+        label = f"#{k + 1} theta {b.theta_deg:.1f} {b.theta_class} phi {b.phi_deg:.1f}"
+        # Beside the blade at 60 % of its length, on its right-hand side.
+        r0, r1 = np.asarray(b.root_px), np.asarray(b.tip_px)
+        along = (r1 - r0) / length
+        anchor = r0 + 0.6 * (r1 - r0) + np.array([-along[1], along[0]]) * 18 * max(s, 0.7)
+        (tw, th), _ = cv2.getTextSize(label, cv2.FONT_HERSHEY_SIMPLEX, scale, thick)
+        if anchor[0] < r0[0] + 0.6 * (r1 - r0)[0]:
+            anchor[0] -= tw  # text on the left of the blade ends at the anchor
+        x = int(np.clip(anchor[0], 2, max(2, w - tw - 2)))
+        y = int(np.clip(anchor[1] + th / 2, th + 2, h - 4))
+        _text(img, label, (x, y), scale, color, thick)
+    hub = tuple(int(round(v)) for v in result.hub_px)
+    cv2.circle(img, hub, max(3, round(6 * s)), (40, 40, 255), -1, cv2.LINE_AA)
+    cv2.circle(img, hub, max(3, round(6 * s)), (255, 255, 255), 1, cv2.LINE_AA)
+    # Legend: the classes and the angle convention.
+    step = int(24 * max(s, 0.7))
+    y = h - 4 * step + step // 2
+    for name in CLASSES:
+        _text(img, f"{name} {CLASS_INTERVALS[name]}", (8, y), scale, CLASS_COLORS_BGR[name], thick)
+        y += step
+    _text(img, "angles CCW from right, y up", (8, y), scale, (255, 255, 255), thick)
+    return img
+
+
+def overlay_background(inp: PitchInput, explicit: Path | None) -> tuple[np.ndarray | None, str]:
+    """The photo to draw on: ``explicit`` (must load and match the masks' size) or the first
+    candidate that exists and matches; else None (black canvas). Returns (image, note)."""
+    h, w = inp.contours.image_size if inp.contours is not None else (0, 0)
+    if explicit is not None:
+        img = cv2.imread(str(explicit), cv2.IMREAD_COLOR)
+        if img is None:
+            raise InputError(f"{explicit}: cannot read the image for the overlay")
+        if img.shape[:2] != (h, w):
+            raise InputError(f"{explicit}: {img.shape[1]}x{img.shape[0]} does not match the "
+                             f"masks ({w}x{h})")
+        return img, ""
+    for p in inp.background_candidates:
+        if p.is_file():
+            img = cv2.imread(str(p), cv2.IMREAD_COLOR)
+            if img is not None and img.shape[:2] == (h, w):
+                return img, ""
+            return None, f"{p}: unreadable or not {w}x{h}; overlay drawn on the masks"
+    return None, ""
