@@ -1,0 +1,391 @@
+"""pitch: θ (eq. 7 and principal axis), classes, φ hub -> tip, overlay and CLI, on blade masks
+built in code and on turbines rendered through the one geometry."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from wtcli.contours import find_contours
+from wtcli.errors import PerceptionError
+from wtcli.geometry import Camera, Turbine
+from wtcli.geometry.render import instance_masks
+from wtcli.masks import Instances, write_instances
+from wtcli.pitch import (ACUTE, HORIZONTAL, PITCH_SCHEMA, VERTICAL, BladePitch, classify_theta,
+                         draw_pitch_overlay, measure_pitch, normalize_theta, pitch_from_instances,
+                         read_pitch, rect_eq7)
+
+
+# ---- synthetic masks -----------------------------------------------------------------------------
+def blade_polygon(hub, phi_deg, length, root_half, tip_half, start=0.0):
+    """A tapered blade from ``start`` px off the hub to ``length``, pointing at φ (y up)."""
+    r = math.radians(phi_deg)
+    u = np.array([math.cos(r), -math.sin(r)])  # image coordinates, y down
+    n = np.array([-u[1], u[0]])
+    hub = np.asarray(hub, float)
+    p0, p1 = hub + start * u, hub + length * u
+    return np.array([p0 + root_half * n, p1 + tip_half * n, p1 - tip_half * n,
+                     p0 - root_half * n])
+
+
+def fill(poly, h, w):
+    m = np.zeros((h, w), np.uint8)
+    cv2.fillPoly(m, [np.round(np.asarray(poly) * 16).astype(np.int32)], 1, cv2.LINE_8, shift=4)
+    return m.astype(bool)
+
+
+def make_blade_mask(h, w, phi_deg, thickness=14.0, length=None, hub=None, taper=0.3, start=12.0):
+    hub = (w / 2, h / 2) if hub is None else hub
+    length = 0.45 * min(h, w) if length is None else length
+    return fill(blade_polygon(hub, phi_deg, length, thickness / 2, taper * thickness / 2, start),
+                h, w)
+
+
+def rotor(h, w, phis, thickness=14.0, hub=None, nacelle=True, **kw):
+    hub = (w / 2, h / 2) if hub is None else hub
+    masks = [make_blade_mask(h, w, p, thickness, hub=hub, **kw) for p in phis]
+    labels = ["blade"] * len(phis)
+    if nacelle:
+        m = np.zeros((h, w), np.uint8)
+        cv2.circle(m, tuple(int(round(v)) for v in hub), 14, 1, -1)
+        masks.append(m.astype(bool))
+        labels.append("nacelle")
+    return Instances(np.array(labels, object), np.stack(masks))
+
+
+def err(a, b, period):
+    d = abs(a - b) % period
+    return min(d, period - d)
+
+
+# ---- classes -------------------------------------------------------------------------------------
+EPS = 1e-6
+
+
+@pytest.mark.parametrize("theta, cls", [
+    (0, HORIZONTAL), (EPS, HORIZONTAL), (30 - EPS, HORIZONTAL), (30, HORIZONTAL),
+    (30 + EPS, ACUTE), (45, ACUTE), (60 - EPS, ACUTE), (60, ACUTE),
+    (60 + EPS, VERTICAL), (90, VERTICAL), (120 - EPS, VERTICAL),
+    (120, ACUTE), (120 + EPS, ACUTE), (150 - EPS, ACUTE),
+    (150, HORIZONTAL), (150 + EPS, HORIZONTAL), (180 - EPS, HORIZONTAL),
+    (180, HORIZONTAL), (-10, HORIZONTAL), (405, ACUTE), (270, VERTICAL),
+    (30 + 1e-8, HORIZONTAL),  # below the file's 6 decimals: classified as written, 30.0
+    (179.9999999, HORIZONTAL),
+])
+def test_class_boundaries_exactly_as_design(theta, cls):
+    assert classify_theta(theta) == cls
+
+
+def test_normalize_theta_wraps_and_rounds():
+    assert normalize_theta(180) == 0.0
+    assert normalize_theta(179.99999999) == 0.0
+    assert normalize_theta(-30) == 150.0
+    assert normalize_theta(359.5) == 179.5
+    with pytest.raises(ValueError, match="finite"):
+        classify_theta(float("nan"))
+
+
+# ---- eq. 7 ---------------------------------------------------------------------------------------
+@pytest.mark.parametrize("theta", [0, 0.5, 1, 44.9, 45, 45.1, 89, 89.5, 90, 90.5, 91, 134.9, 135,
+                                   135.1, 179, 179.5])
+def test_eq7_on_a_rectangle_ignores_minarearect_angle_convention(theta):
+    poly = blade_polygon((200, 200), theta, 170, 8, 8, start=-170)  # a plain rectangle
+    rect = rect_eq7(poly)
+    assert err(rect.angle_deg, theta, 180) < 1e-3
+    assert rect.length == pytest.approx(340, abs=0.01) and rect.width == pytest.approx(16, abs=0.01)
+    assert rect.top[1] <= rect.bottom[1]  # top = smaller image y
+    assert 0 <= rect.angle_deg < 180
+
+
+def test_eq7_uses_box_points_not_the_returned_angle():
+    # Whatever range cv2.minAreaRect reports its angle in, the returned θ is ours.
+    poly = blade_polygon((100, 100), 100, 80, 5, 5, start=-80)
+    (_, _), (_, _), a = cv2.minAreaRect(poly.astype(np.float32))
+    assert a != pytest.approx(100) and err(rect_eq7(poly).angle_deg, 100, 180) < 1e-3
+
+
+# ---- angles over the whole circle -------------------------------------------------------------
+def test_single_blade_every_degree_theta_and_phi():
+    """One tapered blade (no nacelle) at φ = 0..359°: θ, class and φ (the wider end is the hub)."""
+    h = w = 240
+    for phi in range(360):
+        inst = Instances(np.array(["blade"], object), make_blade_mask(h, w, phi, 12, 100)[None])
+        res = pitch_from_instances(inst, expected_blades=1)
+        b, = res.blades
+        assert res.hub_source == "blade_taper"
+        assert err(b.theta_deg, phi % 180, 180) < 0.5, phi
+        assert err(b.phi_deg, phi, 360) < 0.5, phi
+        theta_true = phi % 180
+        if min(abs(theta_true - x) for x in (0, 30, 60, 120, 150, 180)) > 0.5:
+            assert b.theta_class == classify_theta(theta_true), phi
+
+
+def test_three_blade_rotor_every_degree():
+    h, w = 300, 320
+    for az in range(0, 360):
+        phis = [az, az + 120, az + 240]
+        inst = rotor(h, w, phis, 12, length=130)
+        res = pitch_from_instances(inst)
+        assert res.hub_source == "nacelle"
+        assert np.hypot(res.hub_px[0] - w / 2, res.hub_px[1] - h / 2) < 1.0
+        for b in res.blades:
+            want = phis[b.source_index] % 360
+            assert err(b.phi_deg, want, 360) < 0.5, (az, b)
+            assert err(b.theta_deg, want % 180, 180) < 0.5
+
+
+def test_without_nacelle_the_blade_axes_give_the_hub():
+    inst = rotor(300, 300, [20, 140, 260], 12, nacelle=False, hub=(140, 160))
+    res = pitch_from_instances(inst)
+    assert res.hub_source == "blade_axes"
+    assert np.hypot(res.hub_px[0] - 140, res.hub_px[1] - 160) < 1.0
+    assert sorted(round(p) for p in res.phis) == [20, 140, 260]
+
+
+@pytest.mark.parametrize("thickness, tol", [(2.0, 1.0), (5.0, 0.5), (30.0, 0.5), (60.0, 0.7)])
+def test_thin_and_thick_blades(thickness, tol):
+    for az in range(0, 120, 7):
+        phis = [az + 0.3, az + 120.3, az + 240.3]
+        inst = rotor(400, 400, phis, thickness, length=170, start=20, taper=0.5)
+        res = pitch_from_instances(inst, area_threshold=20)
+        for b in res.blades:
+            assert err(b.phi_deg, phis[b.source_index], 360) < tol, (thickness, az, b.phi_deg)
+
+
+def test_one_pixel_lines_still_measure():
+    m = np.zeros((3, 200, 200), np.uint8)
+    want = []
+    for k, phi in enumerate([10, 130, 250]):
+        r = math.radians(phi)
+        a = (100 + round(8 * math.cos(r)), 100 - round(8 * math.sin(r)))
+        b = (100 + round(90 * math.cos(r)), 100 - round(90 * math.sin(r)))
+        cv2.line(m[k], a, b, 1, 1)
+        want.append(math.degrees(math.atan2(a[1] - b[1], b[0] - a[0])) % 360)
+    res = pitch_from_instances(Instances(np.array(["blade"] * 3, object), m > 0), 20)
+    for got, w in zip(res.phis, want):
+        assert err(got, w, 360) < 0.5
+
+
+def test_jagged_and_noisy_masks():
+    rng = np.random.default_rng(3)
+    h = w = 400
+    for az in (5.0, 47.0, 88.0):
+        phis = [az, az + 120, az + 240]
+        inst = rotor(h, w, phis, 18, length=170, start=20)
+        masks = inst.masks.copy()
+        for k in range(3):
+            edge = cv2.morphologyEx(masks[k].astype(np.uint8), cv2.MORPH_GRADIENT,
+                                    np.ones((3, 3), np.uint8)) > 0
+            flip = edge & (rng.random((h, w)) < 0.5)  # ragged boundary
+            masks[k] ^= flip
+            specks = rng.random((h, w)) < 0.0005  # salt noise far from the blade
+            masks[k] |= cv2.dilate(specks.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+            masks[k][200:205, 5:9] = False
+        noisy = Instances(inst.labels, masks)
+        res = pitch_from_instances(noisy, area_threshold=50)
+        assert res.contours.dropped > 10  # the specks were filtered by eq. 6
+        for b in res.blades:
+            assert err(b.phi_deg, phis[b.source_index], 360) < 0.6
+
+
+@pytest.mark.parametrize("hub, tol", [((140, 100), 0.5), ((60, 50), 1.5)])
+def test_blades_cut_by_the_image_border(hub, tol):
+    # All three blades run out of the frame; near the corner one keeps a short stub (about
+    # 5x as long as wide) whose slanted cut tilts its principal axis by about 1.3°.
+    h, w = 240, 320
+    phis = [15, 135, 255]
+    inst = rotor(h, w, phis, 14, hub=hub, length=300)
+    res = pitch_from_instances(inst, area_threshold=50)
+    for b in res.blades:
+        assert err(b.phi_deg, phis[b.source_index], 360) < tol
+    assert res.image_size == (h, w)
+
+
+# ---- rendered turbines (the one geometry) -----------------------------------------------------------
+@pytest.mark.parametrize("azimuth, yaw, side", [(0, 0, 0), (33, 120, 0), (90, 250, 0), (61, 10, 15),
+                                                 (178, 300, -12)])
+def test_rendered_turbine_matches_camera_image_angles(azimuth, yaw, side):
+    t = Turbine.with_rotor_azimuth(azimuth, id="t", base=(0, 0, 0), hub_height=90,
+                                   rotor_diameter=110, yaw_deg=yaw)
+    a = math.radians(side)
+    view = np.array([math.cos(a) * t.axis[0] - math.sin(a) * t.axis[1],
+                     math.sin(a) * t.axis[0] + math.cos(a) * t.axis[1], 0.0])
+    cam = Camera(800, 600, 20, 23.5).looking_at(t.hub_center + view * 150, t.hub_center)
+    parts = instance_masks(t, cam)
+    inst = Instances(np.array([p[0] for p in parts], object), np.stack([p[2] for p in parts]))
+    res = pitch_from_instances(inst)
+    tips = t.blade_tips()
+    for b in res.blades:
+        k = parts[b.source_index][1]
+        phi = cam.image_angle_deg(t.hub_center, tips[k])
+        assert err(b.phi_deg, phi, 360) < 0.3
+        assert err(b.theta_eq7_deg, phi % 180, 180) < 3.0  # minAreaRect tilts on the taper
+    hub_uv = cam.project(t.hub_center[None])[0][0]
+    assert np.hypot(*(np.asarray(res.hub_px) - hub_uv)) < 3.0
+
+
+# ---- blade counts and bad input ----------------------------------------------------------------------
+def test_blade_counts_are_clear_errors():
+    h = w = 240
+    named = {"file_name": "x.png"}
+    for n in (1, 2, 4):
+        phis = [k * 360 / n + 10 for k in range(n)]
+        cs = find_contours(rotor(h, w, phis, 10, length=100), 50, image=named)
+        with pytest.raises(PerceptionError, match=f"found {n} blades? in x.png, expected 3"):
+            measure_pitch(cs, 3)
+        for expected in (None, 0, n):
+            res = measure_pitch(cs, expected)
+            assert len(res) == n
+            for b in res.blades:
+                assert err(b.phi_deg, phis[b.source_index], 360) < 0.5
+    no_blades = find_contours(rotor(h, w, [], nacelle=True), 50, image=named)
+    with pytest.raises(PerceptionError, match="no blade found in x.png"):
+        measure_pitch(no_blades)
+
+
+def test_two_opposite_blades_without_nacelle_use_their_common_end():
+    cs = find_contours(rotor(240, 240, [30, 210], 12, length=100, nacelle=False), 50)
+    res = measure_pitch(cs, 2)
+    assert res.hub_source == "common_end"
+    assert sorted(round(p) for p in res.phis) == [30, 210]
+
+
+def test_blade_pitch_checks_itself():
+    cs = find_contours(rotor(240, 240, [10, 130, 250], 12, length=100), 50)
+    b = measure_pitch(cs).blades[0]
+    kw = dict(b.__dict__)
+    with pytest.raises(ValueError, match="expected class"):
+        BladePitch(**{**kw, "theta_class": VERTICAL})
+    with pytest.raises(ValueError, match="phi_deg"):
+        BladePitch(**{**kw, "phi_deg": 360.0})
+    with pytest.raises(ValueError, match="θ \\+ 180"):
+        BladePitch(**{**kw, "phi_deg": (b.theta_deg + 90) % 360})
+
+
+# ---- overlay -------------------------------------------------------------------------------------------
+def test_overlay_draws_on_photo_and_on_masks():
+    inst = rotor(240, 320, [10, 130, 250], 12, length=100)
+    res = pitch_from_instances(inst)
+    photo = np.full((240, 320, 3), 90, np.uint8)
+    out = draw_pitch_overlay(photo, res)
+    assert out.shape == photo.shape and (out != photo).any() and (photo == 90).all()
+    canvas = draw_pitch_overlay(None, res)
+    assert canvas.shape == (240, 320, 3) and canvas.any()
+    with pytest.raises(ValueError, match="expected an image of 320x240"):
+        draw_pitch_overlay(np.zeros((10, 10, 3), np.uint8), res)
+
+
+# ---- CLI -------------------------------------------------------------------------------------------
+def write_rotor_instances(path, rotors, size=(240, 320)):
+    h, w = size
+    images = [{"id": i + 1, "file_name": f"r{i}.png", "width": w, "height": h}
+              for i in range(len(rotors))]
+    return write_instances(path, images, [rotor(h, w, p, 12, length=100) for p in rotors])
+
+
+def test_cli_demo_chain(cli, tmp_path):
+    inst = write_rotor_instances(tmp_path / "in" / "instances.json", [[10, 130, 250]])
+    photo = np.full((240, 320, 3), 120, np.uint8)
+    cv2.imwrite(str(tmp_path / "in" / "r0.png"), photo)
+    out = tmp_path / "out"
+    r = cli("contours", inst, "--out", out / "contours.json")
+    assert r.exit_code == 0, r.stderr
+    r = cli("pitch", out / "contours.json", "--out", out / "pitch.json", "--overlay-dir",
+            out / "overlays")
+    assert r.exit_code == 0, r.stderr
+    doc = json.loads((out / "pitch.json").read_text())
+    assert doc["schema"] == PITCH_SCHEMA and doc["schema_version"] == 1
+    img, = doc["images"]
+    assert img["error"] is None and img["n_blades"] == 3
+    assert [round(b["phi_deg"]) for b in img["blades"]] == [10, 130, 250]
+    assert [b["theta_class"] for b in img["blades"]] == [HORIZONTAL, ACUTE, VERTICAL]
+    ov = cv2.imread(img["overlay"])
+    assert ov.shape == (240, 320, 3)
+    assert (ov == 120).mean() > 0.5  # drawn on the photo found next to the instances JSON
+    (res, err_, _), = read_pitch(out / "pitch.json")
+    assert err_ is None and len(res) == 3
+
+
+def test_cli_json_stdout_is_clean(cli, tmp_path):
+    inst = write_rotor_instances(tmp_path / "instances.json", [[10, 130, 250]])
+    r = cli("pitch", inst, "--json")
+    assert r.exit_code == 0
+    doc = json.loads(r.stdout)
+    assert doc["schema"] == PITCH_SCHEMA and doc["images"][0]["blades"][0]["theta_class"]
+
+
+def test_cli_mask_pngs_binary_and_label(cli, tmp_path):
+    inst = rotor(240, 320, [20, 140, 260], 12, length=100)
+    for k in range(3):
+        cv2.imwrite(str(tmp_path / f"blade_{k}.png"), inst.masks[k].astype(np.uint8) * 255)
+    cv2.imwrite(str(tmp_path / "nacelle.png"), inst.masks[3].astype(np.uint8) * 255)
+    files = [tmp_path / f"blade_{k}.png" for k in range(3)] + [tmp_path / "nacelle.png"]
+    r = cli("pitch", *files, "--json", "--overlay-dir", tmp_path / "ov")
+    assert r.exit_code == 0, r.stderr
+    img, = json.loads(r.stdout)["images"]
+    assert img["hub_source"] == "nacelle"
+    assert sorted(round(b["phi_deg"]) for b in img["blades"]) == [20, 140, 260]
+    label = np.zeros((240, 320), np.uint8)
+    for k in range(3):
+        label[inst.masks[k]] = k + 1
+    cv2.imwrite(str(tmp_path / "labels.png"), label)
+    r = cli("pitch", tmp_path / "labels.png", "--json")
+    assert r.exit_code == 0, r.stderr
+    img, = json.loads(r.stdout)["images"]
+    assert img["hub_source"] == "blade_axes" and img["n_blades"] == 3
+
+
+def test_cli_batch_partial_failure(cli, tmp_path):
+    inst = write_rotor_instances(tmp_path / "instances.json",
+                                 [[10, 130, 250], [0, 90, 180, 270], [40, 160, 280]])
+    r = cli("pitch", inst, "--out", tmp_path / "pitch.json", "--json")
+    assert r.exit_code == 9
+    doc = json.loads(r.stdout)
+    errs = [i["error"] for i in doc["images"]]
+    assert errs[0] is None and errs[2] is None
+    assert "found 4 blades in r1.png, expected 3" in errs[1]
+    assert "1 of 3 images failed" in r.stderr and "Traceback" not in r.stderr
+    assert cli("pitch", inst, "--blades", "0", "--json").exit_code == 0
+
+
+def one_line_error(r, code, text):
+    assert r.exit_code == code, (r.exit_code, r.stdout, r.stderr)
+    assert text in r.stderr and r.stderr.strip().count("\n") == 0 and "Traceback" not in r.stderr
+
+
+def test_cli_bad_inputs(cli, tmp_path):
+    four = write_rotor_instances(tmp_path / "four.json", [[0, 90, 180, 270]])
+    one_line_error(cli("pitch", four), 5, "found 4 blades")
+    two = write_rotor_instances(tmp_path / "two.json", [[0, 180]])
+    one_line_error(cli("pitch", two), 5, "found 2 blades")
+    empty = np.zeros((50, 50), np.uint8)
+    cv2.imwrite(str(tmp_path / "empty.png"), empty)
+    one_line_error(cli("pitch", tmp_path / "empty.png"), 5, "the mask is empty")
+    tiny = empty.copy()
+    tiny[5:8, 5:8] = 255
+    cv2.imwrite(str(tmp_path / "tiny.png"), tiny)
+    one_line_error(cli("pitch", tmp_path / "tiny.png"), 5, "no contour above the area threshold")
+    tower = np.zeros((50, 50), np.uint8)
+    tower[5:45, 20:30] = 255
+    cv2.imwrite(str(tmp_path / "tower.png"), tower)
+    one_line_error(cli("pitch", tmp_path / "tower.png"), 5, "no blade found in tower.png")
+    (tmp_path / "broken.png").write_bytes(b"\x89PNG broken")
+    one_line_error(cli("pitch", tmp_path / "broken.png"), 3, "cannot read the image")
+    (tmp_path / "photo.jpg").write_bytes(b"")
+    one_line_error(cli("pitch", tmp_path / "photo.jpg"), 3, "run `wtinspect segment`")
+    (tmp_path / "plan.json").write_text('{"schema": "wtinspect.plan", "schema_version": 1}')
+    one_line_error(cli("pitch", tmp_path / "plan.json"), 3, "expected a COCO instances JSON")
+    (tmp_path / "c.json").write_text('{"schema": "wtinspect.contours", "schema_version": 7}')
+    one_line_error(cli("pitch", tmp_path / "c.json"), 3, "schema_version 7")
+    (tmp_path / "c2.json").write_text('{"schema": "wtinspect.contours", "schema_version": 1, '
+                                      '"images": [{"image_size": [5, 5]}]}')
+    one_line_error(cli("pitch", tmp_path / "c2.json"), 3, "missing key")
+    one_line_error(cli("pitch", tmp_path / "missing.json"), 3, "file not found")
+    ok = write_rotor_instances(tmp_path / "ok.json", [[10, 130, 250]])
+    cv2.imwrite(str(tmp_path / "wrong_size.png"), np.zeros((10, 10, 3), np.uint8))
+    one_line_error(cli("pitch", ok, "--overlay-dir", tmp_path / "ov", "--image",
+                       tmp_path / "wrong_size.png"), 3, "does not match the masks")
