@@ -1,0 +1,256 @@
+"""Everything behind the turbines, per pixel from the camera's viewing rays: sky gradient, sun
+glow, clouds on a plane overhead, flat ground textured in world metres (so perspective, scale
+and horizon tilt follow the camera), sea beyond a coastline, distant ridges, and haze that grows
+with distance. Colours are BGR float32 in [0, 1]."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from wtcli.geometry import Camera, Turbine
+from wtcli.synth.noise import fbm, noise_1d, smoothstep, tile_fbm
+from wtcli.synth.scene import Environment
+
+MAX_GROUND_M = 40000.0
+
+# Sky colours (zenith, horizon), BGR.
+_SKY = {
+    "clear": ((0.66, 0.42, 0.16), (0.95, 0.86, 0.74)),
+    "hazy": ((0.82, 0.70, 0.55), (0.93, 0.90, 0.86)),
+    "overcast": ((0.66, 0.64, 0.62), (0.82, 0.81, 0.79)),
+    "sunset": ((0.55, 0.38, 0.30), (0.50, 0.70, 0.93)),
+}
+
+# Land palettes: (base colours to mix by low-frequency noise, bush/tree colour), BGR.
+_LAND = {
+    "scrub": ([(0.36, 0.50, 0.58), (0.30, 0.42, 0.47), (0.42, 0.56, 0.62)], (0.12, 0.22, 0.19)),
+    "fields": ([(0.20, 0.48, 0.40), (0.30, 0.58, 0.62), (0.22, 0.38, 0.30), (0.40, 0.60, 0.66)],
+               (0.10, 0.24, 0.16)),
+    "forest": ([(0.12, 0.26, 0.18), (0.15, 0.30, 0.24), (0.20, 0.34, 0.30)], (0.07, 0.14, 0.09)),
+    "dry": ([(0.48, 0.62, 0.70), (0.40, 0.55, 0.64), (0.55, 0.66, 0.72)], (0.22, 0.32, 0.30)),
+}
+
+
+def _jitter(rng: np.random.Generator, c, amount: float = 0.04) -> np.ndarray:
+    return np.clip(np.asarray(c, np.float32) + rng.normal(0, amount, 3).astype(np.float32), 0, 1)
+
+
+def _remap_wrap(tile: np.ndarray, mx: np.ndarray, my: np.ndarray) -> np.ndarray:
+    size = tile.shape[0]
+    return cv2.remap(tile, np.mod(mx, size).astype(np.float32), np.mod(my, size).astype(np.float32),
+                     cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
+
+
+def sky_colours(env: Environment, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    zen, hor = _SKY[env.sky]
+    return _jitter(rng, zen, 0.05), _jitter(rng, hor, 0.03)
+
+
+def sun_direction(env: Environment) -> np.ndarray:
+    a, e = math.radians(env.sun_azimuth_deg), math.radians(env.sun_elevation_deg)
+    return np.array([math.sin(a) * math.cos(e), math.cos(a) * math.cos(e), math.sin(e)])
+
+
+def render_background(camera: Camera, env: Environment, turbine: Turbine,
+                      rng: np.random.Generator, zenith: np.ndarray, horizon: np.ndarray) -> np.ndarray:
+    H, W = camera.height_px, camera.width_px
+    vs, us = np.mgrid[0:H, 0:W]
+    d = camera.rays(np.stack([us.ravel(), vs.ravel()], 1)).astype(np.float32)
+    dx, dy, dz = (d[:, i].reshape(H, W) for i in range(3))
+    sun = sun_direction(env).astype(np.float32)
+    cos_sun = dx * sun[0] + dy * sun[1] + dz * sun[2]
+    elev = np.degrees(np.arcsin(np.clip(dz, -1, 1)))
+    az = np.degrees(np.arctan2(dx, dy)) % 360.0
+
+    # ---- sky --------------------------------------------------------------------------------
+    t = np.clip(elev / 70.0, 0, 1) ** 0.55
+    sky = horizon + (zenith - horizon) * t[..., None]
+    warm = np.array([0.85, 0.95, 1.0], np.float32) if env.sky != "sunset" else \
+        np.array([0.55, 0.80, 1.0], np.float32)
+    s = env.sun_strength
+    glow = s * (0.55 * np.exp((cos_sun - 1) / 0.0009) + 0.35 * np.exp((cos_sun - 1) / 0.02)
+                + 0.22 * np.exp((cos_sun - 1) / 0.25))
+    if env.sky == "overcast":  # a bright patch where the sun hides behind the clouds
+        glow = glow + 0.12 * np.exp((cos_sun - 1) / 0.2)
+    sky = sky + glow[..., None] * (warm - sky * 0.6)
+
+    # Clouds on a plane ~2 km up; fade towards the horizon where they would alias.
+    up = dz > 0.01
+    cloud_tile = tile_fbm(rng, 256, int(rng.integers(3, 7)), octaves=5, gain=0.55)
+    shade_tile = tile_fbm(rng, 256, int(rng.integers(4, 9)), octaves=4)
+    hc, mpp = 2000.0, float(rng.uniform(20, 60))
+    dzc = np.maximum(dz, 0.01)
+    cx_, cy_ = dx / dzc * hc / mpp, dy / dzc * hc / mpp
+    cn = _remap_wrap(cloud_tile, cx_, cy_)
+    sn = _remap_wrap(shade_tile, cx_ * 1.7, cy_ * 1.7)
+    cov = env.cloud_cover
+    dens = smoothstep(1.0 - cov - 0.15, 1.0 - cov + 0.25, cn) * smoothstep(0.01, 0.18, dz) * up
+    if env.sky == "overcast":
+        dens = np.maximum(dens, 0.85 * smoothstep(0.0, 0.05, dz))
+        base = float(rng.uniform(0.55, 0.8))
+        ccol = (base * (0.75 + 0.45 * sn))[..., None] * np.array([1.0, 1.0, 0.98], np.float32)
+    else:
+        lit = 0.82 + 0.2 * s
+        ccol = (lit * (0.72 + 0.32 * sn))[..., None] * np.array([0.98, 0.99, 1.0], np.float32)
+        ccol = ccol + (0.4 * glow)[..., None]
+        if env.sky == "sunset":
+            ccol = ccol * np.array([0.75, 0.85, 1.0], np.float32)
+    sky = sky * (1 - dens[..., None]) + ccol * dens[..., None]
+
+    # ---- ground (flat, z = 0) -----------------------------------------------------------------
+    img = sky
+    down = dz < -1e-4
+    if down.any():
+        img = _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img)
+    if env.hills:
+        img = _hills(camera, env, rng, dz, elev, az, horizon, img)
+    return np.clip(img, 0, 1.2)
+
+
+def _haze(col: np.ndarray, dist: np.ndarray, env: Environment, haze_col: np.ndarray) -> np.ndarray:
+    fog = 1.0 - np.exp(-dist / env.visibility_m)
+    return col * (1 - fog[..., None]) + haze_col * fog[..., None]
+
+
+def _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img):
+    H, W = dz.shape
+    h = max(float(camera.position[2]), 0.5)
+    tt = np.minimum(h / np.maximum(-dz, 1e-6), MAX_GROUND_M)
+    X = camera.position[0] + tt * dx
+    Y = camera.position[1] + tt * dy
+
+    base_cols, bush_col = _LAND[env.ground]
+    base_cols = [_jitter(rng, c, 0.03) for c in base_cols]
+    bush_col = _jitter(rng, bush_col, 0.02)
+
+    # Land use: a 4-5 km tile at ~8 m per texel; fields as a patchwork of cells.
+    T = 512
+    mL = float(rng.uniform(6.0, 10.0))
+    sel = tile_fbm(rng, T, int(rng.integers(3, 8)), octaves=4)
+    land = np.zeros((T, T, 3), np.float32)
+    k = len(base_cols)
+    if env.ground == "fields":
+        n = int(rng.integers(6, 14))
+        cells = np.floor(np.mgrid[0:T, 0:T] / (T / n)).astype(np.int32)
+        jitter = tile_fbm(rng, T, 4, octaves=2)
+        idx = (cells[0] * 7 + cells[1] * 13 + (jitter * 3).astype(np.int32)) % k
+        land = np.stack([np.asarray(base_cols)[idx][..., c] for c in range(3)], -1)
+        land = land * (0.85 + 0.3 * sel[..., None])
+    else:
+        pos = sel * (k - 1)
+        i0 = np.floor(pos).astype(int)
+        f = (pos - i0)[..., None]
+        i1 = np.minimum(i0 + 1, k - 1)
+        bc = np.asarray(base_cols, np.float32)
+        land = bc[i0] * (1 - f) + bc[i1] * f
+    bright = tile_fbm(rng, T, int(rng.integers(6, 14)), octaves=3)
+    land = land * (0.8 + 0.4 * bright[..., None])
+    # Dirt roads and the gravel pad at the turbine's foot, drawn into the land tile.
+    road = np.array(_jitter(rng, (0.62, 0.72, 0.78), 0.04), np.float32)
+    bx, by = turbine.base[0] / mL, turbine.base[1] / mL
+    land = np.ascontiguousarray(land)
+    for _ in range(int(rng.integers(1, 4))):
+        pts = [(bx, by)]
+        ang = rng.uniform(0, 2 * math.pi)
+        for _ in range(int(rng.integers(6, 14))):
+            ang += rng.normal(0, 0.5)
+            step = rng.uniform(8, 25)
+            pts.append((pts[-1][0] + step * math.cos(ang), pts[-1][1] + step * math.sin(ang)))
+        p = np.mod(np.asarray(pts), T).astype(np.int32)
+        for a, b in zip(p[:-1], p[1:]):
+            if np.abs(a - b).max() < T / 2:
+                cv2.line(land, tuple(int(x) for x in a), tuple(int(x) for x in b),
+                         tuple(float(x) for x in road), 1, cv2.LINE_AA)
+    pad = max(1, int(round(float(rng.uniform(12, 30)) / mL)))
+    cv2.circle(land, (int(bx) % T, int(by) % T), pad, tuple(float(x) for x in road), -1, cv2.LINE_AA)
+    land_blur = cv2.GaussianBlur(land, (0, 0), 3)
+
+    # Bushes / trees / crop rows: a fine tile, ~0.4-1 m per texel.
+    TF = 512
+    mF = float(rng.uniform(0.4, 1.0))
+    bush = tile_fbm(rng, TF, int(rng.integers(24, 64)), octaves=3, gain=0.6)
+    amount = {"scrub": 0.65, "fields": 0.25, "forest": 0.8, "dry": 0.35}[env.ground]
+    thr = float(rng.uniform(0.45, 0.65))
+    bmask = smoothstep(thr, thr + 0.12, bush) * amount
+    fine = tile_fbm(rng, TF, 96, octaves=2)
+
+    # Metres per pixel on the ground: picks texture detail vs its average (no aliasing).
+    foot = tt / camera.fx / np.sqrt(np.maximum(-dz, 0.02))
+    w_fine = np.clip(1.6 * mF / np.maximum(foot, 1e-6), 0, 1)
+    w_land = np.clip(1.5 * mL / np.maximum(foot, 1e-6), 0, 1)
+    lx, ly = X / mL, -Y / mL
+    lc = _remap_wrap(land, lx, ly) * w_land[..., None] + \
+        _remap_wrap(land_blur, lx, ly) * (1 - w_land[..., None])
+    fx_, fy_ = X / mF, -Y / mF
+    bm = _remap_wrap(bmask, fx_, fy_) * w_fine + float(bmask.mean()) * (1 - w_fine)
+    fn = _remap_wrap(fine, fx_, fy_) * w_fine + float(fine.mean()) * (1 - w_fine)
+    col = lc * (1 - bm[..., None]) + bush_col * bm[..., None]
+    col = col * (0.85 + 0.3 * fn[..., None])
+    # Light: sun on flat ground, sky light everywhere.
+    light = 0.5 + 0.6 * env.sun_strength * max(math.sin(math.radians(env.sun_elevation_deg)), 0.1)
+    col = col * light
+
+    if env.sea_distance_m is not None:
+        b = math.radians(env.sea_bearing_deg)
+        u = np.array([math.sin(b), math.cos(b)])
+        rel_x, rel_y = X - turbine.base[0], Y - turbine.base[1]
+        along = rel_x * u[0] + rel_y * u[1]
+        across = -rel_x * u[1] + rel_y * u[0]
+        prof = noise_1d(rng, 4096, 12, octaves=5)
+        ai = np.mod((across / 20.0).astype(np.int64), 4096)
+        coast = env.sea_distance_m + (prof[ai] - 0.5) * float(rng.uniform(200, 1500))
+        sea = along > coast
+        deep = _jitter(rng, (0.42, 0.26, 0.06), 0.05)
+        if env.sky == "overcast":
+            deep = deep * 0.6 + 0.25
+        fres = 0.03 + 0.9 * (1 - np.abs(dz)) ** 6
+        sea_col = deep * (1 - fres[..., None]) + horizon * fres[..., None]
+        # Sun glitter: reflection of the sun on waves.
+        sun = sun_direction(env)
+        refl = dx * sun[0] + dy * sun[1] - dz * sun[2]
+        waves = _remap_wrap(fine, X / 3.0, Y / 1.0)
+        glit = env.sun_strength * np.exp((refl - 1) / 0.01) * (0.5 + waves)
+        sea_col = sea_col + glit[..., None] * 0.9
+        shore = sea & (along < coast + 15)
+        sea_col[shore] = sea_col[shore] * 0.6 + 0.3
+        col = np.where(sea[..., None], sea_col, col)
+
+    haze_col = horizon + (glow * 0.6)[..., None] * (1 - horizon)
+    col = _haze(col, tt, env, haze_col)
+    # Soft horizon: blend the last fraction of a degree into the sky.
+    edge = smoothstep(0.0, 0.004, -dz)[..., None]
+    col = col * edge + sky * (1 - edge)
+    return np.where(down[..., None], col, img)
+
+
+def _hills(camera, env, rng, dz, elev, az, horizon, img):
+    hcam = float(camera.position[2])
+    far = None
+    for layer in range(env.hills):
+        D = float(rng.uniform(6000, 15000)) if layer == 0 else float(rng.uniform(2500, 6000))
+        height = float(rng.uniform(150, 700)) if layer == 0 else float(rng.uniform(60, 300))
+        prof = noise_1d(rng, 3600, int(rng.integers(3, 12)), octaves=6, gain=0.5)
+        prof = np.clip((prof - 0.35) / 0.65, 0, 1) ** float(rng.uniform(0.8, 1.6))
+        ridge = np.degrees(np.arctan((height * prof - hcam) / D))
+        r = ridge[(az * 10).astype(np.int64) % 3600]
+        # Below the ridge and beyond the ground's distance D: the hill hides what lies behind.
+        ground_dist = np.where(dz < -1e-6, hcam / np.maximum(-dz, 1e-6), np.inf)
+        mask = (elev < r) & (ground_dist > D)
+        if not mask.any():
+            continue
+        cols = _LAND["scrub" if env.ground != "forest" else "forest"][0]
+        base = _jitter(rng, cols[int(rng.integers(len(cols)))], 0.03) * 0.8
+        H, W = dz.shape
+        tex = fbm(rng, H, W, float(rng.uniform(20, 60)), octaves=4)
+        col = base * (0.7 + 0.6 * tex[..., None])
+        vis = env.visibility_m * (1.0 if far is None else 1.0)
+        fog = 1.0 - math.exp(-D / vis)
+        col = col * (1 - fog) + horizon * fog * np.array([1.0, 0.98, 0.96], np.float32)
+        # Antialias the ridge line.
+        a = smoothstep(0.0, 0.08, r - elev)[..., None] * mask[..., None]
+        img = img * (1 - a) + col * a
+        far = D
+    return img

@@ -1,0 +1,64 @@
+"""What the drone's camera does to the picture: exposure and gamma, white balance, vignetting,
+defocus or motion blur, sensor noise, and JPEG re-encoding. Pixel-only: masks are untouched."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import cv2
+import numpy as np
+
+
+def camera_effects(img: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, dict[str, Any]]:
+    """``img``: BGR float32 in about [0, 1] -> BGR uint8, plus the settings drawn."""
+    H, W = img.shape[:2]
+    fx: dict[str, Any] = {}
+    gain = float(rng.uniform(0.78, 1.22))
+    gamma = float(rng.uniform(0.8, 1.25))
+    wb = (1.0 + rng.normal(0, 0.035, 3)).astype(np.float32)
+    fx.update(exposure=gain, gamma=gamma, white_balance=wb.tolist())
+    img = np.clip(img * gain * wb, 0, None)
+    # Soft highlight roll-off, then gamma.
+    img = 1.0 - np.exp(-img * 1.6) if rng.random() < 0.3 else np.clip(img, 0, 1)
+    img = np.power(np.clip(img, 0, 1), gamma)
+    sat = float(rng.uniform(0.75, 1.25))
+    grey = img.mean(axis=2, keepdims=True)
+    img = grey + (img - grey) * sat
+    fx["saturation"] = sat
+    if rng.random() < 0.4:
+        vs, us = np.ogrid[0:H, 0:W]
+        r2 = ((us - W / 2) / (W / 2)) ** 2 + ((vs - H / 2) / (H / 2)) ** 2
+        k = float(rng.uniform(0.05, 0.25))
+        img = img * (1 - k * r2 / 2)[..., None].astype(np.float32)
+        fx["vignette"] = k
+    u = rng.random()
+    if u < 0.3:
+        s = float(rng.uniform(0.4, 1.4)) * W / 640
+        img = cv2.GaussianBlur(img, (0, 0), s)
+        fx["blur"] = {"kind": "defocus", "sigma_px": s}
+    elif u < 0.42:
+        n = int(rng.integers(3, 10))
+        ang = float(rng.uniform(0, 180))
+        k = np.zeros((n, n), np.float32)
+        c = (n - 1) / 2
+        dxy = np.array([math.cos(math.radians(ang)), math.sin(math.radians(ang))]) * c
+        cv2.line(k, (int(round(c - dxy[0])), int(round(c - dxy[1]))),
+                 (int(round(c + dxy[0])), int(round(c + dxy[1]))), 1.0, 1)
+        k /= max(k.sum(), 1e-6)
+        img = cv2.filter2D(img, -1, k)
+        fx["blur"] = {"kind": "motion", "length_px": n, "angle_deg": ang}
+    sigma = float(rng.uniform(0.0, 0.018))
+    if sigma > 0.002:
+        noise = rng.normal(0, sigma, (H, W, 1)).astype(np.float32)
+        chroma = rng.normal(0, sigma * 0.4, (H, W, 3)).astype(np.float32)
+        img = img + noise + chroma
+    fx["noise_sigma"] = sigma
+    out = np.clip(img * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    if rng.random() < 0.6:
+        q = int(rng.integers(35, 96))
+        ok, buf = cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, q])
+        if ok:
+            out = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+            fx["jpeg_quality"] = q
+    return out, fx

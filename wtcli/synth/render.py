@@ -1,0 +1,394 @@
+"""Render synthetic drone photos of wind turbines with their instance masks and ground truth.
+
+``render_sample(seed)`` draws a scene (``wtcli.synth.scene``), paints the background from the
+camera's rays (``wtcli.synth.background``), projects the turbines' meshes through the one camera
+model with ``wtcli.geometry.render`` at twice the resolution (so edges and thin distant blades are
+antialiased), shades every face, composites, and applies camera effects (``wtcli.synth.post``).
+Masks come from the very face map the colours come from, so occlusion always agrees.
+
+Image arrays are BGR uint8 [H, W, 3]; masks bool [N, H, W]. Angles follow DESIGN.md: image
+angles counter-clockwise with y up, 0 = right; θ in [0, 180), φ hub -> tip in [0, 360).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import cv2
+import numpy as np
+
+from wtcli.geometry import Camera, Mesh, Turbine
+from wtcli.geometry.render import ProjectedMesh, paint, project_mesh
+from wtcli.jsonio import atomic_write_bytes, document, write_json
+from wtcli.masks import Instances, write_instances
+from wtcli.synth.background import render_background, sky_colours, sun_direction
+from wtcli.synth.noise import fbm
+from wtcli.synth.post import camera_effects
+from wtcli.synth.scene import VIEWS, Scene, sample_scene
+
+TRUTH_SCHEMA = "wtinspect.synth_truth"
+TRUTH_VERSION = 1
+SUPERSAMPLE = 2
+_LOGO_COLOURS = ((0.55, 0.25, 0.05), (0.2, 0.45, 0.1), (0.15, 0.15, 0.6), (0.3, 0.3, 0.3))
+
+
+def blade_class(theta_deg: float) -> str:
+    """The paper's classes of θ: horizontal [0,30]∪[150,180), acute (30,60]∪[120,150),
+    vertical (60,120)."""
+    t = theta_deg % 180.0
+    if t <= 30.0 or t >= 150.0:
+        return "horizontal"
+    if t <= 60.0 or t >= 120.0:
+        return "acute"
+    return "vertical"
+
+
+def min_instance_pixels(width: int, height: int) -> int:
+    """Smallest visible part that is labelled (smaller bits of distant turbines stay unlabelled
+    background, as they would be lost in any real annotation too)."""
+    return max(6, int(round(3e-5 * width * height)))
+
+
+@dataclass(frozen=True)
+class SynthSample:
+    image: np.ndarray  # (H, W, 3) uint8 BGR
+    instances: Instances  # main turbine first (blades by index, tower, nacelle), then others
+    truth: dict[str, Any]  # JSON-ready ground truth (see docs/synth.md)
+
+    def __post_init__(self) -> None:
+        if self.image.ndim != 3 or self.image.shape[2] != 3 or self.image.dtype != np.uint8:
+            raise ValueError(f"expected a BGR uint8 image (H, W, 3), got {self.image.shape} "
+                             f"{self.image.dtype}")
+        if self.instances.image_size != self.image.shape[:2]:
+            raise ValueError(f"expected masks of size {self.image.shape[:2]}, got "
+                             f"{self.instances.image_size}")
+
+
+def _check_args(seed: int, width: int, height: int, view: str | None) -> None:
+    if not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"expected a seed >= 0, got {seed!r}")
+    if not (32 <= width <= 8192 and 32 <= height <= 8192):
+        raise ValueError(f"expected width and height in 32..8192, got {width}x{height}")
+    if view is not None and view not in VIEWS:
+        raise ValueError(f"expected view in {VIEWS} or None, got {view!r}")
+
+
+def render_sample(seed: int, width: int = 640, height: int = 480,
+                  view: str | None = None) -> SynthSample:
+    """One synthetic photo; a pure function of (seed, width, height, view).
+
+    ``view``: "front", "oblique", "side", "rear", or None to draw one (VIEW_ODDS)."""
+    _check_args(seed, width, height, view)
+    rng = np.random.default_rng([int(seed), width, height, (VIEWS.index(view) + 1) if view else 0])
+    scene = sample_scene(rng, width, height, view)
+    cam = scene.camera
+    zenith, horizon = sky_colours(scene.env, rng)
+    bg = render_background(cam, scene.env, scene.turbine, rng, zenith, horizon)
+    bg = _distractors(bg, scene, rng)
+
+    turbines = (scene.turbine,) + scene.others
+    colour, parts = _render_turbines(turbines, scene, rng, zenith, horizon)
+    premult, alpha = colour
+    img = premult + bg * (1.0 - alpha[..., None])
+    image, effects = camera_effects(img.astype(np.float32), rng)
+
+    instances, owners = _instances(parts, turbines, width, height)
+    truth = _truth(seed, scene, instances, owners, effects)
+    return SynthSample(image=image, instances=instances, truth=truth)
+
+
+# ---- turbines -------------------------------------------------------------------------------
+def _mesh_detail(turbine: Turbine, camera: Camera) -> tuple[int, int]:
+    dist = float(np.linalg.norm(turbine.hub_center - camera.position))
+    px = turbine.rotor_diameter * camera.fx / max(dist, 1.0)
+    if px > 500:
+        return 20, 40
+    if px > 150:
+        return 14, 28
+    return 8, 14
+
+
+def _render_turbines(turbines, scene: Scene, rng, zenith, horizon):
+    """Paint every turbine's faces at SUPERSAMPLE x resolution; return (premultiplied colour,
+    coverage) at the output resolution and the supersampled global part map."""
+    cam = scene.camera
+    ss = SUPERSAMPLE
+    W, H = cam.width_px, cam.height_px
+    cam2 = Camera(W * ss, H * ss, cam.focal_mm, cam.sensor_width_mm, cam.position, cam.R)
+    env = scene.env
+
+    verts, faces, gparts, owner, local = [], [], [], [], []
+    off_v, off_p = 0, 0
+    for j, t in enumerate(turbines):
+        m = t.mesh(*_mesh_detail(t, cam))
+        verts.append(m.vertices)
+        faces.append(m.faces + off_v)
+        gparts.append(m.face_part.astype(np.int32) + off_p)
+        owner.append(np.full(len(m.faces), j, np.int32))
+        local.append(m.face_part.astype(np.int32))
+        off_v += len(m.vertices)
+        off_p += t.n_blades + 2
+    mesh = Mesh(np.concatenate(verts), np.concatenate(faces), np.concatenate(gparts))
+    face_owner = np.concatenate(owner)
+    face_local = np.concatenate(local)
+
+    proj = project_mesh(mesh, cam2)
+    fi = proj.face_index
+    tri = mesh.vertices[mesh.faces[fi]]
+    centroid = tri.mean(axis=1)
+    normal = mesh.face_normals()[fi]
+    to_cam = cam.position - centroid
+    to_cam /= np.linalg.norm(to_cam, axis=1, keepdims=True)
+    facing = np.sum(normal * to_cam, axis=1)
+    n_bl = np.array([t.n_blades for t in turbines])[face_owner[fi]]
+    is_blade_or_tower = face_local[fi] <= n_bl  # blades 0..N-1 and tower N: outward-wound tubes
+    # Back faces of the closed tubes are hidden anyway; skip them, and faces off the canvas.
+    u, v = proj.uv[..., 0], proj.uv[..., 1]
+    onscreen = (u.max(1) >= -2) & (u.min(1) <= W * ss + 2) & (v.max(1) >= -2) & (v.min(1) <= H * ss + 2)
+    keep = onscreen & ~(is_blade_or_tower & (facing < -0.02))
+    proj = ProjectedMesh(proj.uv[keep], proj.depth[keep], fi[keep], proj.face_part[keep])
+    fi, centroid, normal, facing = fi[keep], centroid[keep], normal[keep], facing[keep]
+    to_cam = to_cam[keep]
+    normal = np.where(facing[:, None] < 0, -normal, normal)
+
+    col = _shade(turbines, face_owner[fi], face_local[fi], centroid, normal, to_cam,
+                 proj.depth, env, rng, zenith, horizon)
+
+    ids = np.full((H * ss, W * ss), -1, np.int32)
+    paint(ids, proj, np.arange(len(fi)))
+    inside = ids >= 0
+    colour2 = np.zeros((H * ss, W * ss, 3), np.float32)
+    colour2[inside] = col[ids[inside]]
+    # Paint-like surface variation (dirt, erosion, uneven paint) in screen space, subtle.
+    var = fbm(rng, H * ss // 4 + 1, W * ss // 4 + 1, 24, octaves=3)
+    var = cv2.resize(var, (W * ss, H * ss), interpolation=cv2.INTER_LINEAR)
+    colour2 *= (0.94 + 0.12 * var)[..., None]
+    premult = cv2.resize(colour2, (W, H), interpolation=cv2.INTER_AREA)
+    alpha = cv2.resize(inside.astype(np.float32), (W, H), interpolation=cv2.INTER_AREA)
+    part2 = np.full((H * ss, W * ss), -1, np.int32)
+    part2[inside] = proj.face_part[ids[inside]]
+    return (premult, alpha), part2
+
+
+def _shade(turbines, owner, local, centroid, normal, to_cam, depth, env, rng, zenith, horizon):
+    F = len(owner)
+    L = sun_direction(env)
+    s = env.sun_strength
+    albedo = np.tile(np.asarray(env.turbine_albedo, np.float32), (F, 1))
+    # Tower a touch different from blades sometimes; nacelle a touch brighter.
+    n_bl = np.array([t.n_blades for t in turbines])[owner]
+    albedo[local == n_bl] *= float(rng.uniform(0.95, 1.03))
+    albedo[local == n_bl + 1] *= float(rng.uniform(0.97, 1.05))
+    albedo = np.clip(albedo, 0, 1)
+    if env.tip_bands or env.logo:
+        for j, t in enumerate(turbines):
+            sel = owner == j
+            if env.tip_bands:
+                band = float(rng.uniform(0.06, 0.14))
+                red = np.array([0.18, 0.2, 0.75], np.float32)
+                for k in range(t.n_blades):
+                    b = sel & (local == k)
+                    sp = (centroid[b] - t.hub_center) @ t.blade_direction(k) / t.tip_radius
+                    stripe = ((sp > 1 - band) & (sp < 1 - band * 0.66)) | (sp > 1 - band * 0.33)
+                    idx = np.nonzero(b)[0][stripe]
+                    albedo[idx] = red
+            if env.logo:
+                b = sel & (local == t.n_blades + 1)
+                side = np.cross(np.array([0, 0, 1.0]), t.axis)
+                rel = centroid[b] - t.nacelle_center
+                zr = rel[:, 2] / t.nacelle_height
+                ar = rel @ t.axis / t.nacelle_length
+                on_side = np.abs(normal[b] @ side) > 0.9
+                stripe = on_side & (zr > 0.0) & (zr < 0.25) & (ar > -0.3) & (ar < 0.45)
+                colour = _LOGO_COLOURS[int(rng.integers(len(_LOGO_COLOURS)))]
+                albedo[np.nonzero(b)[0][stripe]] = colour
+    nz = normal[:, 2:3]
+    sky_amb = (0.6 * horizon + 0.4 * zenith) * (0.55 + 0.35 * (1 - s))
+    ground_amb = np.array([0.36, 0.44, 0.48], np.float32) * (0.35 + 0.35 * s)
+    amb = sky_amb * (0.5 + 0.5 * nz) + ground_amb * (0.5 - 0.5 * nz)
+    ndl = np.clip(normal @ L, 0, None)[:, None]
+    sun_col = np.array([0.97, 0.99, 1.0], np.float32) if env.sky != "sunset" else \
+        np.array([0.6, 0.8, 1.0], np.float32)
+    diffuse = ndl * s * sun_col * float(rng.uniform(0.7, 0.95))
+    h = L[None, :] + to_cam
+    h /= np.linalg.norm(h, axis=1, keepdims=True)
+    spec = float(rng.uniform(0.05, 0.3)) * s * np.clip(np.sum(normal * h, 1), 0, 1) ** float(
+        rng.uniform(12, 60))
+    col = albedo * (amb + diffuse) + spec[:, None] * sun_col
+    fog = 1.0 - np.exp(-depth / env.visibility_m)
+    col = col * (1 - fog[:, None]) + horizon * fog[:, None]
+    return col.astype(np.float32)
+
+
+def _instances(part2: np.ndarray, turbines, width: int, height: int):
+    """Labelled masks at the output resolution: a pixel belongs to a part when that part covers
+    at least half of it at the supersampled resolution."""
+    ss = SUPERSAMPLE
+    minpix = min_instance_pixels(width, height)
+    labels, masks, owners = [], [], []
+    counts = np.bincount(part2.ravel() + 1)
+    gid = 0
+    for j, t in enumerate(turbines):
+        n = t.n_blades
+        for p in range(n + 2):
+            g = gid + p
+            if g + 1 < len(counts) and counts[g + 1] >= minpix * ss * ss * 0.5:
+                cov = cv2.resize((part2 == g).astype(np.float32), (width, height),
+                                 interpolation=cv2.INTER_AREA)
+                m = cov >= 0.5
+                if int(m.sum()) >= minpix:
+                    labels.append("blade" if p < n else ("tower" if p == n else "nacelle"))
+                    masks.append(m)
+                    owners.append({"turbine": j, "turbine_id": t.id,
+                                   "blade": p if p < n else None})
+        gid += n + 2
+    if not labels:
+        return Instances.empty(height, width), owners
+    return Instances(np.array(labels, dtype=object), np.stack(masks)), owners
+
+
+def _truth(seed, scene: Scene, instances: Instances, owners, effects) -> dict[str, Any]:
+    t, cam = scene.turbine, scene.camera
+    W, H = cam.width_px, cam.height_px
+    hub = t.hub_center
+    tips = t.blade_tips()
+    uv, z = cam.project(np.vstack([hub, tips]))
+    visible_px = {o["blade"]: int(instances.masks[i].sum()) for i, o in enumerate(owners)
+                  if o["turbine"] == 0 and o["blade"] is not None}
+    blades = []
+    for k in range(t.n_blades):
+        phi = cam.image_angle_deg(hub, tips[k])
+        theta = phi % 180.0
+        tip_uv = uv[k + 1]
+        blades.append({
+            "index": k, "theta_deg": theta, "phi_deg": phi, "class": blade_class(theta),
+            "rotor_azimuth_deg": t.azimuths_deg[k], "visible": k in visible_px,
+            "pixels": visible_px.get(k, 0),
+            "tip_px": tip_uv.tolist(),
+            "tip_in_frame": bool(z[k + 1] > 0 and 0 <= tip_uv[0] <= W - 1 and 0 <= tip_uv[1] <= H - 1),
+        })
+    hub_in = bool(z[0] > 0 and 0 <= uv[0, 0] <= W - 1 and 0 <= uv[0, 1] <= H - 1)
+    return {
+        "seed": int(seed), "width": W, "height": H,
+        "view": scene.view, "view_offset_deg": scene.view_offset_deg,
+        "camera_elevation_deg": scene.camera_elevation_deg, "roll_deg": scene.roll_deg,
+        "fill": scene.fill,
+        "camera": cam.to_dict(), "turbine": t.to_dict(),
+        "hub_px": uv[0].tolist(), "hub_in_frame": hub_in,
+        "blades": blades,
+        "blades_visible": sum(b["visible"] for b in blades),
+        "blades_whole_in_frame": sum(b["tip_in_frame"] for b in blades) if hub_in else 0,
+        "other_turbines": [o.to_dict() for o in scene.others],
+        "instances": owners,
+        "environment": scene.env.to_dict(),
+        "camera_effects": effects,
+    }
+
+
+def _distractors(bg: np.ndarray, scene: Scene, rng) -> np.ndarray:
+    """Power pylons (lattice towers with lines) on the ground: thin structures that are not
+    turbines, projected through the scene camera."""
+    if rng.random() > 0.3:
+        return bg
+    cam = scene.camera
+    t = scene.turbine
+    out = bg.copy()
+    H, W = bg.shape[:2]
+    d0 = float(np.linalg.norm(t.base_xyz[:2] - cam.position[:2]))
+    fwd = cam.forward[:2] / max(np.linalg.norm(cam.forward[:2]), 1e-6)
+    heading = math.atan2(fwd[0], fwd[1])
+    line_dir = float(rng.uniform(0, 2 * math.pi))
+    start = cam.position[:2] + (d0 + float(rng.uniform(100, 1500))) * np.array(
+        [math.sin(heading + rng.uniform(-0.6, 0.6)), math.cos(heading + rng.uniform(-0.6, 0.6))])
+    colour = tuple(float(x) for x in np.clip(np.array([0.35, 0.36, 0.37]) + rng.normal(0, 0.05), 0, 1))
+    h = float(rng.uniform(25, 45))
+    tops = []
+    for i in range(int(rng.integers(2, 6))):
+        p = start + i * float(rng.uniform(250, 400)) * np.array([math.sin(line_dir), math.cos(line_dir)])
+        base = np.array([p[0], p[1], 0.0])
+        w = h * 0.12
+        corners = [base + np.array([sx * w, sy * w, 0]) for sx in (-1, 1) for sy in (-1, 1)]
+        apex = base + np.array([0, 0, h])
+        arm = [base + np.array([-h * 0.3, 0, h * 0.8]), base + np.array([h * 0.3, 0, h * 0.8])]
+        segs = [(c, apex) for c in corners] + [(arm[0], arm[1])]
+        segs += [(corners[0], corners[3] * 0.5 + apex * 0.5), (corners[1], corners[2] * 0.5 + apex * 0.5)]
+        for a, b in segs:
+            uv, z = cam.project(np.array([a, b]))
+            if (z > 1).all():
+                cv2.line(out, tuple(int(x) for x in uv[0]), tuple(int(x) for x in uv[1]), colour, 1,
+                         cv2.LINE_AA)
+        tops.append(arm)
+    for a, b in zip(tops[:-1], tops[1:]):
+        for side in (0, 1):
+            uv, z = cam.project(np.array([a[side], b[side]]))
+            if (z > 1).all():
+                cv2.line(out, tuple(int(x) for x in uv[0]), tuple(int(x) for x in uv[1]), colour, 1,
+                         cv2.LINE_AA)
+    return out
+
+
+# ---- datasets -------------------------------------------------------------------------------
+def sample_seed(seed: int, index: int) -> int:
+    """The render_sample seed of image ``index`` in a dataset made with ``seed``."""
+    return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1, np.uint32)[0])
+
+
+def render_dataset(out_dir: str | Path, count: int, seed: int, width: int = 640,
+                   height: int = 480, view: str | None = None, progress: bool = True,
+                   on_image: Callable[[int], None] | None = None) -> dict[str, Any]:
+    """Write ``count`` renders to ``out_dir``: images/NNNNN.jpg, instances.json (COCO-compatible,
+    RLE masks) and ground_truth.json. Returns a summary dict. Existing files of the same names
+    are replaced; each file is written atomically."""
+    if count < 1:
+        raise ValueError(f"expected count >= 1, got {count}")
+    _check_args(seed, width, height, view)
+    out = Path(out_dir)
+    images, per_image, truth = [], [], {}
+    views: dict[str, int] = {}
+    n_inst = 0
+
+    def run(step: Callable[[], None]) -> None:
+        for i in range(count):
+            s = sample_seed(seed, i)
+            smp = render_sample(s, width, height, view)
+            name = f"images/{i:05d}.jpg"
+            ok, buf = cv2.imencode(".jpg", smp.image, [cv2.IMWRITE_JPEG_QUALITY, 92])
+            if not ok:
+                raise RuntimeError("JPEG encoding failed")
+            atomic_write_bytes(out / name, buf.tobytes())
+            images.append({"id": i + 1, "file_name": name, "width": width, "height": height})
+            per_image.append(smp.instances)
+            truth[name] = smp.truth
+            views[smp.truth["view"]] = views.get(smp.truth["view"], 0) + 1
+            nonlocal n_inst
+            n_inst += len(smp.instances)
+            step()
+            if on_image:
+                on_image(i)
+
+    if progress:
+        from wtcli.console import make_progress
+
+        with make_progress() as bar:
+            task = bar.add_task("rendering", total=count, status="")
+            run(lambda: bar.advance(task))
+    else:
+        run(lambda: None)
+
+    params = {"count": count, "seed": seed, "width": width, "height": height,
+              "view": view or "mixed"}
+    write_instances(out / "instances.json", images, per_image,
+                    extra={"synth": params})
+    write_json(out / "ground_truth.json",
+               document(TRUTH_SCHEMA, TRUTH_VERSION, {"params": params, "images": truth}))
+    return {"out_dir": str(out), **params, "images": len(images), "instances": n_inst,
+            "views": views, "files": {"instances": str(out / "instances.json"),
+                                      "ground_truth": str(out / "ground_truth.json"),
+                                      "images": str(out / "images")}}
+
+
+__all__ = ["SynthSample", "render_sample", "render_dataset", "sample_seed", "blade_class",
+           "TRUTH_SCHEMA", "TRUTH_VERSION"]
