@@ -1,0 +1,473 @@
+"""Fly a plan under a scenario and measure what the flight achieved.
+
+``fly_plan(plan, scenario)`` flies every route of the plan with the eq. 10 PID controller
+(``automated``) and, if asked, the baselines on the same weather: ``no_compensation`` (the same
+plan, feed-forward only), ``fixed_pattern`` (a non-adaptive plan, PID controlled) and
+``manual`` (wtcli.fly.pilot). Each flight is then measured, vectorised over all steps:
+deviation from the planned path, clearance to every turbine part, height above ground,
+coverage of the blade surfaces from the photos actually taken, GSD, time, length, battery.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from wtcli.fly.pilot import manual_route, ou_series, pilot_inputs
+from wtcli.fly.scenario import Scenario
+from wtcli.fly.sim import G, Reference, Track, fly, make_reference
+from wtcli.fly.terrain import Ground
+from wtcli.fly.wind import make_wind
+from wtcli.geometry import BLADE_SIDES, Camera, Turbine
+from wtcli.geometry.coverage import Coverage, measure_coverage
+from wtcli.plan_file import Plan, Route
+
+FLIGHT_KINDS = ("automated", "no_compensation", "fixed_pattern", "manual")
+SETTLED_M = 0.5
+# Streams of the seeded random generator, so each source of randomness is independent.
+_WIND, _SENSOR, _PILOT = 1, 2, 3
+
+
+@dataclass(frozen=True)
+class UavFlight:
+    """One UAV's route, flown."""
+
+    uav: str
+    route: Route  # the route as flown (the manual pilot's is retimed)
+    planned: Route  # the route of the plan (the path deviation is measured against)
+    ref: Reference
+    track: Track
+    photo_step: np.ndarray  # (P,) index into the track
+    photo_yaw_deg: np.ndarray  # (P,) camera attitude when each photo was taken
+    photo_pitch_deg: np.ndarray
+    photo_roll_deg: np.ndarray
+    photo_component: np.ndarray  # (P,) str
+    wind_summary: dict
+
+    @property
+    def photo_pos(self) -> np.ndarray:
+        return self.track.pos[self.photo_step]
+
+
+@dataclass(frozen=True)
+class Violation:
+    kind: str  # clearance | collision | ground | transit_altitude
+    uav: str
+    t_start: float
+    t_end: float
+    worst_m: float  # the smallest clearance / height above ground in the episode
+    at: tuple[float, float, float]
+    what: str  # turbine part or "ground"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, "uav": self.uav, "t_start_s": self.t_start, "t_end_s": self.t_end,
+                "worst_m": self.worst_m, "position": list(self.at), "what": self.what}
+
+
+@dataclass(frozen=True)
+class FlightResult:
+    """One way of flying (automated or a baseline) over all routes, with its measurements."""
+
+    kind: str
+    controller: str
+    uavs: list[UavFlight]
+    turbines: list[Turbine]
+    camera: Camera
+    safe_distance_m: float
+    target_gsd_mm: float
+    time_s: float  # until the last UAV settles at its last waypoint
+    path_length_m: float
+    deviation: np.ndarray  # per step (all UAVs): distance to the planned path
+    tracking_error: np.ndarray  # per step: distance to the time-reference
+    clearance: np.ndarray  # per step: distance to the nearest turbine part
+    agl: np.ndarray  # per step: height above ground
+    violations: list[Violation]
+    coverage: dict[str, Coverage]  # per turbine id, from the photos taken
+    planned_coverage: dict[str, Coverage] | None
+    photo_gsd_mm: np.ndarray  # (P,) GSD at the nearest surface, per photo
+    energy_wh: dict[str, float]
+    battery_wh: float
+    notes: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        for name in ("deviation", "tracking_error", "clearance", "agl"):
+            a = getattr(self, name)
+            if not np.isfinite(a).all():
+                raise ValueError(f"expected finite {name}, got non-finite values")
+
+    # ---- summary numbers ----------------------------------------------------------------
+    @property
+    def coverage_average(self) -> float:
+        vals = [v for c in self.coverage.values() for s in c.by_blade_side().values()
+                for v in s.values()]
+        return float(np.mean(vals)) if vals else 0.0
+
+    @property
+    def planned_coverage_average(self) -> float | None:
+        if not self.planned_coverage:
+            return None
+        vals = [v for c in self.planned_coverage.values() for s in c.by_blade_side().values()
+                for v in s.values()]
+        return float(np.mean(vals)) if vals else 0.0
+
+    @property
+    def photos(self) -> int:
+        return int(sum(len(u.photo_step) for u in self.uavs))
+
+    @property
+    def min_clearance_m(self) -> float:
+        return float(self.clearance.min()) if len(self.clearance) else math.inf
+
+    def summary(self) -> dict[str, Any]:
+        """The headline numbers (the paper's Table 1 columns and ours)."""
+        return {"time_min": self.time_s / 60.0, "length_m": self.path_length_m,
+                "coverage_pct": 100.0 * self.coverage_average,
+                "deviation_m": float(self.deviation.mean()),
+                "min_clearance_m": self.min_clearance_m, "violations": len(self.violations)}
+
+    def to_dict(self) -> dict[str, Any]:
+        dev, trk = self.deviation, self.tracking_error
+        cov = {tid: {"blade_sides": c.by_blade_side(), "blade_average": c.blade_average(),
+                     "structure": c.structure_fraction()} for tid, c in self.coverage.items()}
+        gsd = self.photo_gsd_mm
+        per_uav = []
+        for u in self.uavs:
+            per_uav.append({"uav": u.uav, "photos": int(len(u.photo_step)),
+                            "flight_time_s": float(u.track.t[-1] - u.track.t[0]),
+                            "path_length_m": _length(u.track.pos),
+                            "energy_wh": self.energy_wh[u.uav],
+                            "battery_used_pct": 100.0 * self.energy_wh[u.uav] / self.battery_wh,
+                            "wind": u.wind_summary})
+        return {
+            "kind": self.kind, "controller": self.controller,
+            "time_s": self.time_s, "path_length_m": self.path_length_m,
+            "deviation_m": {"mean": float(dev.mean()), "rms": float(np.sqrt((dev ** 2).mean())),
+                            "max": float(dev.max())},
+            "tracking_error_m": {"mean": float(trk.mean()), "rms": float(np.sqrt((trk ** 2).mean())),
+                                 "max": float(trk.max())},
+            "clearance": {"min_m": self.min_clearance_m, "safe_distance_m": self.safe_distance_m,
+                          "violations": [v.to_dict() for v in self.violations]},
+            "min_height_above_ground_m": float(self.agl.min()),
+            "coverage": {"blade_average": self.coverage_average,
+                         "planned_blade_average": self.planned_coverage_average,
+                         "per_turbine": cov},
+            "photos": {"count": self.photos, "target_gsd_mm": self.target_gsd_mm,
+                       "gsd_nearest_surface_mm": {
+                           "mean": float(gsd.mean()) if len(gsd) else None,
+                           "median": float(np.median(gsd)) if len(gsd) else None,
+                           "max": float(gsd.max()) if len(gsd) else None,
+                           "over_target": int((gsd > self.target_gsd_mm * 1.05).sum())}},
+            "battery": {"energy_wh": float(sum(self.energy_wh.values())),
+                        "capacity_wh_per_uav": self.battery_wh,
+                        "max_used_pct": 100.0 * max(self.energy_wh.values()) / self.battery_wh},
+            "uavs": per_uav, "notes": self.notes,
+        }
+
+
+def _length(pos: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(pos, axis=0), axis=1).sum())
+
+
+# ---- flying ----------------------------------------------------------------------------------
+
+def _rng(scn: Scenario, uav_index: int, stream: int) -> np.random.Generator:
+    return np.random.default_rng([scn.seed, uav_index, stream])
+
+
+def fly_route(route: Route, scn: Scenario, ground: Ground, uav_index: int, mode: str,
+              planned: Route | None = None) -> UavFlight:
+    """Fly one route. ``mode``: pid, feedforward or pilot (the route is retimed for the pilot)."""
+    dt = 1.0 / scn.control.control_hz
+    planned = planned or route
+    flown, photo_t = route, route.t[route.photo]
+    if mode == "pilot":
+        flown, photo_t = manual_route(route, scn.manual_pilot)
+    smoothing = 0.0 if mode == "pilot" else scn.control.reference_smoothing_s
+    ref = make_reference(flown.t, flown.pos, flown.yaw_deg, flown.gimbal_pitch_deg, dt, smoothing)
+    n = len(ref.t)
+    g_ref = ground.height(ref.pos)
+    h_rep = float(np.median(ref.pos[:, 2] - g_ref))
+    wind = make_wind(scn.wind, scn.terrain.turbulence_factor, n * scn.substeps, dt / scn.substeps,
+                     max(h_rep, 3.0), _rng(scn, uav_index, _WIND))
+    pilot = None
+    prng = _rng(scn, uav_index, _PILOT)
+    if mode == "pilot":
+        pilot = pilot_inputs(scn.manual_pilot, n, dt, prng)
+    track = fly(ref, scn, wind, g_ref, mode, _rng(scn, uav_index, _SENSOR), pilot)
+
+    steps = np.clip(np.round((photo_t - ref.t[0]) / dt).astype(int), 0, n - 1)
+    yaw = track.yaw_deg[steps].copy()
+    pitch = track.pitch_deg[steps].copy()
+    if mode == "pilot" and len(steps):
+        aim = ou_series(prng, len(steps), 1.0, scn.manual_pilot.aim_sigma_deg, 1e-3, dims=2)
+        yaw += aim[:, 0]
+        pitch += aim[:, 1]
+    roll = _camera_roll(track, steps, yaw, scn.vehicle.gimbal_roll_leak)
+    comp = flown.component[flown.photo] if flown.photo.sum() == len(steps) else \
+        np.array([""] * len(steps), dtype=object)
+    return UavFlight(uav=route.uav, route=flown, planned=planned, ref=ref, track=track,
+                     photo_step=steps, photo_yaw_deg=yaw, photo_pitch_deg=pitch,
+                     photo_roll_deg=roll, photo_component=comp,
+                     wind_summary={"height_m": h_rep, **wind.summary()})
+
+
+def _camera_roll(track: Track, steps: np.ndarray, yaw_deg: np.ndarray, leak: float) -> np.ndarray:
+    """Camera roll let through by the gimbal: ``leak`` times the body bank seen along the view."""
+    if leak <= 0 or not len(steps):
+        return np.zeros(len(steps))
+    T = track.thrust[steps] + np.array([0, 0, G])
+    y = np.radians(yaw_deg)
+    right = np.stack([np.cos(y), -np.sin(y), np.zeros_like(y)], 1)
+    bank = np.degrees(np.arctan2((T * right).sum(1), T[:, 2]))
+    return leak * bank
+
+
+# ---- measuring --------------------------------------------------------------------------------
+
+def path_deviation(route: Route, t: np.ndarray, pos: np.ndarray, window: int = 8,
+                   chunk: int = 8192) -> np.ndarray:
+    """Distance from each position to the planned polyline, searched among the ``window``
+    segments either side of the one being flown at that time (vectorised)."""
+    a_all, b_all = route.pos[:-1], route.pos[1:]
+    m = len(a_all)
+    tw = route.t + np.arange(len(route)) * 1e-9
+    j = np.clip(np.searchsorted(tw, t, side="right") - 1, 0, m - 1)
+    offs = np.arange(-window, window + 1)
+    out = np.empty(len(pos))
+    for s in range(0, len(pos), chunk):
+        J = np.clip(j[s:s + chunk, None] + offs, 0, m - 1)
+        a, b = a_all[J], b_all[J]
+        ab = b - a
+        ap = pos[s:s + chunk, None, :] - a
+        den = np.maximum((ab * ab).sum(-1), 1e-12)
+        u = np.clip((ap * ab).sum(-1) / den, 0.0, 1.0)
+        d = np.linalg.norm(ap - u[..., None] * ab, axis=-1)
+        out[s:s + chunk] = d.min(1)
+    return out
+
+
+def turbine_clearance(turbines: list[Turbine], pos: np.ndarray,
+                      near_m: float = 60.0) -> tuple[np.ndarray, np.ndarray]:
+    """Per point: clearance to the nearest turbine part and the index of that turbine/part as
+    "T1/blade2". Points far from a turbine's bounding box get the box distance (a lower bound
+    that is already larger than ``near_m``), so only nearby steps pay for the exact model."""
+    best = np.full(len(pos), np.inf)
+    which = np.full(len(pos), "", dtype=object)
+    for t in turbines:
+        pts = t.surface_samples(2.0).points
+        lo, hi = pts.min(0) - 1.0, pts.max(0) + 1.0
+        box = np.linalg.norm(np.maximum(np.maximum(lo - pos, pos - hi), 0.0), axis=1)
+        near = box < near_m
+        c = box.copy()
+        if near.any():
+            by_part = t.clearance_by_part(pos[near])
+            c[near] = by_part.min(1)
+            names = np.array([f"{t.id}/{p}" for p in t.part_names()], dtype=object)
+            part = names[by_part.argmin(1)]
+        better = c < best
+        best[better] = c[better]
+        if near.any():
+            tmp = np.full(len(pos), f"{t.id}", dtype=object)
+            tmp[near] = part
+            which[better] = tmp[better]
+        else:
+            which[better] = t.id
+    return best, which
+
+
+def _episodes(mask: np.ndarray) -> list[tuple[int, int]]:
+    if not mask.any():
+        return []
+    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
+    return list(zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]))
+
+
+def _energy_wh(track: Track, scn: Scenario) -> float:
+    """Momentum-theory power: P = P_hover (|T| / g)^1.5 plus climb power m g v_z / eta."""
+    veh = scn.vehicle
+    T = np.linalg.norm(track.thrust + np.array([0, 0, G]), axis=1)
+    p = veh.hover_power_w * (T / G) ** 1.5
+    p += veh.mass_kg * G * np.maximum(track.vel[:, 2], 0.0) / veh.propulsion_efficiency
+    dt = float(track.t[1] - track.t[0]) if len(track.t) > 1 else 0.0
+    return float(p.sum() * dt / 3600.0)
+
+
+def measure(kind: str, controller: str, plan: Plan, flights: list[UavFlight], scn: Scenario,
+            ground: Ground, planned_coverage: bool = False, notes: list[str] | None = None
+            ) -> FlightResult:
+    # Time: each UAV until it settles within SETTLED_M of its last waypoint after the reference
+    # ends (or the end of the settle window).
+    times, devs, trks, agls, pos_all, t_all, uav_all, ref_all, comp_all = [], [], [], [], [], [], [], [], []
+    for f in flights:
+        tr, ref = f.track, f.ref
+        end = ref.end_index
+        d_end = np.linalg.norm(tr.pos[end:] - f.route.pos[-1], axis=1)
+        settled = np.nonzero(d_end < SETTLED_M)[0]
+        k_end = end + (int(settled[0]) if len(settled) else len(d_end) - 1)
+        times.append(float(tr.t[k_end] - tr.t[0]))
+        sl = slice(0, k_end + 1)
+        pos = tr.pos[sl]
+        devs.append(path_deviation(f.route, tr.t[sl], pos))  # same geometry as planned
+        trks.append(np.linalg.norm(pos - ref.pos[sl], axis=1))
+        pos_all.append(pos)
+        t_all.append(tr.t[sl])
+        uav_all.append(np.full(len(pos), f.uav, dtype=object))
+        ref_all.append(ref.pos[sl])
+        rt = f.route.t + np.arange(len(f.route)) * 1e-9
+        seg = np.clip(np.searchsorted(rt, tr.t[sl], side="right"), 0, len(f.route) - 1)
+        comp_all.append(f.route.component[seg])
+    P = np.concatenate(pos_all)
+    T = np.concatenate(t_all)
+    U = np.concatenate(uav_all)
+    REF = np.concatenate(ref_all)
+    COMP = np.concatenate(comp_all)
+    clearance, part = turbine_clearance(plan.turbines, P)
+    g = ground.height(P)
+    agl = P[:, 2] - g
+    ref_agl = REF[:, 2] - ground.height(REF)
+
+    violations: list[Violation] = []
+
+    def add(kind_: str, mask: np.ndarray, values: np.ndarray, what: np.ndarray | str) -> None:
+        for a, b in _episodes(mask):
+            # Episodes never span two UAVs: split where the UAV changes.
+            for s0, s1 in _split_by(U, a, b):
+                i = s0 + int(np.argmin(values[s0:s1]))
+                violations.append(Violation(kind_, str(U[i]), float(T[s0]), float(T[s1 - 1]),
+                                            float(values[i]), tuple(float(x) for x in P[i]),
+                                            str(what if isinstance(what, str) else what[i])))
+
+    add("collision", clearance <= 0.0, clearance, part)
+    add("clearance", (clearance < plan.safe_distance_m) & (clearance > 0.0), clearance, part)
+    planned_low = ref_agl < scn.terrain.min_agl_m + 2.0  # take-off and landing: planned low
+    add("ground", (agl < scn.terrain.min_agl_m) & ~planned_low, agl, "ground")
+    transit = np.array(["transit" in str(c) for c in COMP])
+    add("transit_altitude", transit & (agl < scn.terrain.min_transit_agl_m)
+        & (ref_agl >= scn.terrain.min_transit_agl_m), agl, "ground")
+    violations.sort(key=lambda v: (v.t_start, v.uav, v.kind))
+
+    # Photos: real poses -> the one coverage measure.
+    cam = plan.camera
+    ppos = np.concatenate([f.photo_pos for f in flights]) if flights else np.zeros((0, 3))
+    rots = np.array([Camera.rotation_from_yaw_pitch(y, p, r) for f in flights
+                     for y, p, r in zip(f.photo_yaw_deg, f.photo_pitch_deg, f.photo_roll_deg)]
+                    ).reshape(-1, 3, 3)
+    coverage = _coverage(plan, cam, ppos, rots, scn)
+    pcov = None
+    if planned_coverage:
+        pp, pr = [], []
+        for f in flights:
+            r = f.planned
+            pp.append(r.pos[r.photo])
+            pr += [Camera.rotation_from_yaw_pitch(y, p) for y, p in
+                   zip(r.yaw_deg[r.photo], r.gimbal_pitch_deg[r.photo])]
+        pcov = _coverage(plan, cam, np.concatenate(pp), np.array(pr).reshape(-1, 3, 3), scn)
+    gsd = cam.gsd_mm(turbine_clearance(plan.turbines, ppos)[0]) if len(ppos) else np.zeros(0)
+    energy = {f.uav: _energy_wh(f.track, scn) for f in flights}
+    return FlightResult(
+        kind=kind, controller=controller, uavs=flights, turbines=list(plan.turbines), camera=cam,
+        safe_distance_m=plan.safe_distance_m, target_gsd_mm=plan.target_gsd_mm,
+        time_s=max(times), path_length_m=float(sum(_length(p) for p in pos_all)),
+        deviation=np.concatenate(devs), tracking_error=np.concatenate(trks), clearance=clearance,
+        agl=agl, violations=violations, coverage=coverage, planned_coverage=pcov,
+        photo_gsd_mm=np.asarray(gsd, float), energy_wh=energy, battery_wh=scn.vehicle.battery_wh,
+        notes=list(notes or []))
+
+
+def _split_by(labels: np.ndarray, a: int, b: int) -> list[tuple[int, int]]:
+    out, s = [], a
+    for i in range(a + 1, b):
+        if labels[i] != labels[i - 1]:
+            out.append((s, i))
+            s = i
+    out.append((s, b))
+    return out
+
+
+def _coverage(plan: Plan, cam: Camera, pos: np.ndarray, rots: np.ndarray,
+              scn: Scenario) -> dict[str, Coverage]:
+    out = {}
+    for t in plan.turbines:
+        samples = t.surface_samples(scn.sample_spacing_m)
+        out[t.id] = measure_coverage(samples, cam, pos, rots, plan.target_gsd_mm)
+    return out
+
+
+# ---- the whole run ---------------------------------------------------------------------------
+
+def fly_routes(plan: Plan, scn: Scenario, ground: Ground, mode: str) -> list[UavFlight]:
+    return [fly_route(r, scn, ground, i, mode) for i, r in enumerate(plan.routes)]
+
+
+def make_ground(plan: Plan, scn: Scenario) -> Ground:
+    return Ground.build(scn.terrain, np.array([t.base for t in plan.turbines]), scn.seed)
+
+
+@dataclass(frozen=True)
+class FlightReport:
+    """The automated flight and its baselines under one scenario (schema wtinspect.flight)."""
+
+    scenario: Scenario
+    flights: dict[str, FlightResult]
+    plan_source: str | None = None
+    notes: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if "automated" not in self.flights:
+            raise ValueError("expected an 'automated' flight in the report")
+        for k in self.flights:
+            if k not in FLIGHT_KINDS:
+                raise ValueError(f"expected flight kinds in {FLIGHT_KINDS}, got {k!r}")
+
+    @property
+    def automated(self) -> FlightResult:
+        return self.flights["automated"]
+
+    def violations(self) -> list[Violation]:
+        return self.automated.violations
+
+    def to_dict(self) -> dict[str, Any]:
+        s = self.scenario
+        return {"scenario": {"name": s.name, "description": s.description, "seed": s.seed,
+                             "source": str(s.source) if s.source else None,
+                             "wind": {"speed_ms": s.wind.speed_ms,
+                                      "reference_height_m": s.wind.reference_height_m,
+                                      "direction_deg": s.wind.direction_deg,
+                                      "turbulence": s.wind.turbulence_model,
+                                      "gusts_per_min": s.wind.gust_rate_per_min},
+                             "terrain": s.terrain.kind},
+                "plan": self.plan_source,
+                "flights": {k: f.to_dict() for k, f in self.flights.items()},
+                "summary": {k: f.summary() for k, f in self.flights.items()},
+                "paper": s.paper, "notes": self.notes}
+
+
+def fly_plan(plan: Plan, scn: Scenario, baselines: bool = False, fixed_plan: Plan | None = None,
+             plan_source: str | None = None) -> FlightReport:
+    """Fly ``plan`` (and the baselines the scenario enables, if ``baselines``)."""
+    ground = make_ground(plan, scn)
+    flights = {"automated": measure("automated", "pid", plan, fly_routes(plan, scn, ground, "pid"),
+                                    scn, ground, planned_coverage=True)}
+    notes = []
+    if baselines and scn.baselines.no_compensation:
+        flights["no_compensation"] = measure(
+            "no_compensation", "feedforward", plan, fly_routes(plan, scn, ground, "feedforward"),
+            scn, ground)
+    if baselines and scn.baselines.fixed_pattern:
+        if fixed_plan is None:
+            notes.append("fixed_pattern baseline skipped: it needs the scenario's mission to plan")
+        else:
+            flights["fixed_pattern"] = measure(
+                "fixed_pattern", "pid", fixed_plan, fly_routes(fixed_plan, scn, ground, "pid"),
+                scn, ground)
+    if baselines and scn.baselines.manual:
+        flights["manual"] = measure("manual", "pilot", plan,
+                                    fly_routes(plan, scn, ground, "pilot"), scn, ground)
+    return FlightReport(scenario=scn, flights=flights, plan_source=plan_source, notes=notes)
+
+
+__all__ = ["FLIGHT_KINDS", "FlightReport", "FlightResult", "UavFlight", "Violation", "fly_plan",
+           "fly_route", "measure", "path_deviation", "turbine_clearance", "BLADE_SIDES"]

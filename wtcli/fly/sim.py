@@ -1,0 +1,273 @@
+"""The flight loop: a kinematic multirotor tracking one route under wind.
+
+Vehicle (per unit mass, ENU): the autopilot's velocity loop asks for the acceleration
+``a = (v_cmd - v) / tau_v`` (plus the reference acceleration as feed-forward) and produces it
+with a thrust ``T = a - D(-v)`` that includes its own still-air drag; thrust is limited by the
+maximum tilt (horizontal, g tan(tilt)) and the vertical acceleration limit. The air acts with
+``D(w - v) = c (w - v) + k |w - v| (w - v)`` (rotor drag plus body drag), so
+``dv/dt = T + D(w - v)``: in still air the vehicle gets what it asked for, in wind it is pushed.
+
+Controllers (all output the velocity command ``v_cmd``, limited by the speed and climb limits):
+
+- ``pid``: eq. 10 per axis on the position error e = r - p: ``u = Kp e + Ki int(e) + Kd de/dt``,
+  with de/dt = v_ref - v_f (derivative on the filtered measured velocity, reference velocity as
+  feed-forward, so set-point steps cause no derivative kick), integral clamped and frozen while
+  the command saturates (anti-windup); ``v_cmd = v_ref + u``.
+- ``feedforward``: ``v_cmd = v_ref`` - the plan flown open-loop, with no wind compensation.
+- ``pilot``: a manual pilot (``wtcli.fly.pilot``): sees a delayed, misjudged position and
+  corrects with a stick gain, a deadband and noise, on top of flying the route's velocity.
+
+Physics runs at ``physics_hz`` (semi-implicit Euler), control at ``control_hz``; states are
+recorded at the control rate. Per-step work is a few dozen float operations in plain Python
+(faster than numpy on 3-vectors); everything else is precomputed or evaluated after the run.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from wtcli.errors import SimulationError
+from wtcli.fly.scenario import Scenario
+from wtcli.fly.wind import WindSeries
+
+G = 9.81
+SETTLE_S = 3.0  # hover at the last waypoint after the reference ends
+DIVERGED_M = 1e5
+
+
+@dataclass(frozen=True)
+class Reference:
+    """A route sampled at the control rate (what the controller is asked to follow)."""
+
+    t: np.ndarray  # (N,)
+    pos: np.ndarray  # (N, 3) smoothed set-point
+    vel: np.ndarray  # (N, 3)
+    acc: np.ndarray  # (N, 3)
+    yaw_deg: np.ndarray  # (N,) unwrapped
+    pitch_deg: np.ndarray  # (N,)
+    end_index: int  # first index after the route's last waypoint time
+
+
+def _box(x: np.ndarray, width: int) -> np.ndarray:
+    """Centred moving average along axis 0 with edge padding (odd width)."""
+    if width <= 1:
+        return x
+    h = width // 2
+    pad = np.concatenate([np.repeat(x[:1], h, 0), x, np.repeat(x[-1:], h, 0)])
+    c = np.cumsum(np.concatenate([np.zeros((1,) + x.shape[1:]), pad]), axis=0)
+    return (c[width:] - c[:-width]) / width
+
+
+def make_reference(t_wp: np.ndarray, pos_wp: np.ndarray, yaw_wp: np.ndarray, pitch_wp: np.ndarray,
+                   dt: float, smoothing_s: float) -> Reference:
+    t0, t1 = float(t_wp[0]), float(t_wp[-1])
+    n_end = int(math.ceil((t1 - t0) / dt)) + 1
+    n = n_end + int(round(SETTLE_S / dt))
+    t = t0 + np.arange(n) * dt
+    # np.interp needs increasing xp; nudge repeated times (a hover) apart by a hair.
+    tw = np.asarray(t_wp, float) + np.arange(len(t_wp)) * 1e-9
+    pos = np.stack([np.interp(t, tw, pos_wp[:, i]) for i in range(3)], 1)
+    width = max(1, int(round(smoothing_s / dt)) | 1)
+    pos = _box(_box(pos, width), width) if width > 1 else pos
+    vel = np.gradient(pos, dt, axis=0)
+    acc = np.gradient(vel, dt, axis=0)
+    yaw = np.interp(t, tw, np.degrees(np.unwrap(np.radians(yaw_wp))))
+    pitch = np.interp(t, tw, pitch_wp)
+    return Reference(t, pos, vel, acc, yaw, pitch, n_end)
+
+
+@dataclass(frozen=True)
+class Track:
+    """One simulated flight, at the control rate."""
+
+    t: np.ndarray  # (N,)
+    pos: np.ndarray  # (N, 3) true position
+    vel: np.ndarray  # (N, 3)
+    thrust: np.ndarray  # (N, 3) thrust acceleration (for tilt and power)
+    wind: np.ndarray  # (N, 3) wind at the vehicle
+    yaw_deg: np.ndarray  # (N,) camera heading actually flown
+    pitch_deg: np.ndarray  # (N,) gimbal elevation actually flown
+
+    def __post_init__(self) -> None:
+        n = len(self.t)
+        for name in ("pos", "vel", "thrust", "wind"):
+            if getattr(self, name).shape != (n, 3):
+                raise ValueError(f"expected {name} of shape ({n}, 3), got {getattr(self, name).shape}")
+
+
+@dataclass(frozen=True)
+class PilotInputs:
+    """Precomputed human-pilot signals (see wtcli.fly.pilot)."""
+
+    delay_steps: int
+    gain: float
+    deadband: float
+    perception: np.ndarray  # (N, 3) judged-position error
+    stick: np.ndarray  # (N, 3) stick noise, m/s
+    max_correction: float
+
+
+def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.ndarray,
+        mode: str, rng: np.random.Generator, pilot: PilotInputs | None = None) -> Track:
+    """Fly ``ref`` and return the track. ``mode``: pid, feedforward or pilot."""
+    if mode not in ("pid", "feedforward", "pilot"):
+        raise ValueError(f"expected mode pid, feedforward or pilot, got {mode!r}")
+    veh, gains, ctl = scn.vehicle, scn.gains, scn.control
+    n = len(ref.t)
+    sub = scn.substeps
+    dt = 1.0 / ctl.control_hz
+    dtp = dt / sub
+    if len(wind.extra) < n * sub:
+        raise ValueError(f"expected {n * sub} wind samples, got {len(wind.extra)}")
+
+    # Plain Python lists: indexing them is far cheaper than numpy scalars in the loop.
+    R = ref.pos.tolist()
+    V = ref.vel.tolist()
+    A = (ref.acc if gains.feed_forward and mode != "pilot" else np.zeros_like(ref.acc)).tolist()
+    YR, PR = ref.yaw_deg.tolist(), ref.pitch_deg.tolist()
+    WX = wind.extra.tolist()
+    GR = np.asarray(ground_under_ref, float).tolist()
+    npos = (rng.standard_normal((n, 3)) * veh.position_noise_m).tolist()
+    nvel = (rng.standard_normal((n, 3)) * veh.velocity_noise_ms).tolist()
+    ux_, uy_, _ = wind.unit.tolist()
+    wspd, href, alpha = scn.wind.speed_ms, scn.wind.reference_height_m, scn.wind.shear_exponent
+
+    kp, ki, kd = gains.kp, gains.ki, gains.kd
+    ff = 1.0 if gains.feed_forward else 0.0
+    ilim = gains.integral_limit_ms / ki if ki > 0 else 0.0
+    af = dt / (gains.derivative_filter_s + dt)
+    tau = veh.velocity_time_constant_s
+    vmax, vup, vdn = veh.max_speed_ms, veh.max_climb_ms, veh.max_descent_ms
+    ahmax = G * math.tan(math.radians(veh.max_tilt_deg))
+    azmax = veh.max_vertical_accel_ms2
+    cd, kq = veh.rotor_drag_per_s, veh.body_drag_per_m
+    yr_rate, yr_tau = veh.yaw_rate_deg_s, veh.yaw_time_constant_s
+    gp_rate, gp_tau = veh.gimbal_rate_deg_s, veh.gimbal_time_constant_s
+    if pilot is not None:
+        PP, PS = pilot.perception.tolist(), pilot.stick.tolist()
+        pd, pk, pdb, pmax = pilot.delay_steps, pilot.gain, pilot.deadband, pilot.max_correction
+
+    px, py, pz = R[0]
+    vx = vy = vz = 0.0
+    ix = iy = iz = 0.0
+    vfx = vfy = vfz = 0.0
+    yaw, pit = YR[0], PR[0]
+    out_p, out_v, out_t, out_w, out_y, out_g = [], [], [], [], [], []
+    hist = []  # true positions, for the pilot's delayed view
+    tx = ty = tz = 0.0
+    wx = wy = wz = 0.0
+
+    for k in range(n):
+        rx, ry, rz = R[k]
+        vrx, vry, vrz = V[k]
+        if mode == "pid":
+            nx, ny, nz = npos[k]
+            mvx, mvy, mvz = nvel[k]
+            ex, ey, ez = rx - (px + nx), ry - (py + ny), rz - (pz + nz)
+            vfx += af * (vx + mvx - vfx)
+            vfy += af * (vy + mvy - vfy)
+            vfz += af * (vz + mvz - vfz)
+            cx = ff * vrx + kp * ex + ki * ix + kd * (vrx - vfx)
+            cy = ff * vry + kp * ey + ki * iy + kd * (vry - vfy)
+            cz = ff * vrz + kp * ez + ki * iz + kd * (vrz - vfz)
+        elif mode == "feedforward":
+            cx, cy, cz = vrx, vry, vrz
+        else:
+            hist.append((px, py, pz))
+            j = k - pd
+            if j >= 0:
+                hx, hy, hz = hist[j]
+                qx, qy, qz = PP[j]
+                sx, sy, sz = R[j]
+                ex, ey, ez = sx - (hx + qx), sy - (hy + qy), sz - (hz + qz)
+                e = math.sqrt(ex * ex + ey * ey + ez * ez)
+                if e > pdb:
+                    g = pk * (e - pdb) / e
+                    if g * (e - pdb) > pmax:
+                        g = pmax / e
+                    ex, ey, ez = g * ex, g * ey, g * ez
+                else:
+                    ex = ey = ez = 0.0
+            else:
+                ex = ey = ez = 0.0
+            s0, s1, s2 = PS[k]
+            cx, cy, cz = vrx + ex + s0, vry + ey + s1, vrz + ez + s2
+        # Speed and climb limits; anti-windup: integrate only while unsaturated.
+        sat = False
+        h = math.sqrt(cx * cx + cy * cy)
+        if h > vmax:
+            f = vmax / h
+            cx *= f
+            cy *= f
+            sat = True
+        if cz > vup:
+            cz = vup
+            sat = True
+        elif cz < -vdn:
+            cz = -vdn
+            sat = True
+        if mode == "pid" and not sat:
+            ix += ex * dt
+            iy += ey * dt
+            iz += ez * dt
+            if ix > ilim: ix = ilim  # noqa: E701
+            elif ix < -ilim: ix = -ilim  # noqa: E701
+            if iy > ilim: iy = ilim  # noqa: E701
+            elif iy < -ilim: iy = -ilim  # noqa: E701
+            if iz > ilim: iz = ilim  # noqa: E701
+            elif iz < -ilim: iz = -ilim  # noqa: E701
+        arx, ary, arz = A[k]
+        agl = pz - GR[k]
+        shear = wspd * ((agl if agl > 1.0 else 1.0) / href) ** alpha if wspd > 0 else 0.0
+        mwx, mwy = shear * ux_, shear * uy_
+        for s in range(sub):
+            ex_ = WX[k * sub + s]
+            wx, wy, wz = mwx + ex_[0], mwy + ex_[1], ex_[2]
+            # Thrust: the acceleration asked for plus the vehicle's own still-air drag.
+            sp = math.sqrt(vx * vx + vy * vy + vz * vz)
+            dd = cd + kq * sp
+            tx = (cx - vx) / tau + arx + dd * vx
+            ty = (cy - vy) / tau + ary + dd * vy
+            tz = (cz - vz) / tau + arz + dd * vz
+            th = math.sqrt(tx * tx + ty * ty)
+            if th > ahmax:
+                f = ahmax / th
+                tx *= f
+                ty *= f
+            if tz > azmax:
+                tz = azmax
+            elif tz < -azmax:
+                tz = -azmax
+            rwx, rwy, rwz = wx - vx, wy - vy, wz - vz
+            da = cd + kq * math.sqrt(rwx * rwx + rwy * rwy + rwz * rwz)
+            vx += (tx + da * rwx) * dtp
+            vy += (ty + da * rwy) * dtp
+            vz += (tz + da * rwz) * dtp
+            px += vx * dtp
+            py += vy * dtp
+            pz += vz * dtp
+        # Camera heading and gimbal: first-order tracking with rate limits.
+        d = (YR[k] - yaw) / yr_tau
+        yaw += (yr_rate if d > yr_rate else -yr_rate if d < -yr_rate else d) * dt
+        d = (PR[k] - pit) / gp_tau
+        pit += (gp_rate if d > gp_rate else -gp_rate if d < -gp_rate else d) * dt
+        out_p.append((px, py, pz))
+        out_v.append((vx, vy, vz))
+        out_t.append((tx, ty, tz))
+        out_w.append((wx, wy, wz))
+        out_y.append(yaw)
+        out_g.append(pit)
+        if k % 50 == 0 and not (abs(px) + abs(py) + abs(pz) < DIVERGED_M):
+            raise SimulationError(
+                f"flight diverged at t={ref.t[k]:.1f} s ({mode} controller): position "
+                f"({px:.3g}, {py:.3g}, {pz:.3g}); check the gains and limits of the scenario")
+    pos = np.array(out_p)
+    if not np.isfinite(pos).all() or np.abs(pos).max() >= DIVERGED_M:
+        bad = int(np.argmax(~np.isfinite(pos).all(1) | (np.abs(pos).max(1) >= DIVERGED_M)))
+        raise SimulationError(f"flight diverged at t={ref.t[bad]:.1f} s ({mode} controller); "
+                              "check the gains and limits of the scenario")
+    return Track(t=ref.t.copy(), pos=pos, vel=np.array(out_v), thrust=np.array(out_t),
+                 wind=np.array(out_w), yaw_deg=np.array(out_y), pitch_deg=np.array(out_g))
