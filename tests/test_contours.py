@@ -186,7 +186,7 @@ def test_cli_single_image_ok_and_failing(cli, tmp_path):
     p = write_instances(tmp_path / "one.json", [{"id": 1, "file_name": "a.png", "width": 80,
                                                   "height": 60}], [three_parts()])
     r = cli("contours", p)
-    assert r.exit_code == 0 and "a.png: 1 blade, 1 tower, 0 nacelle (dropped 2" in r.stdout
+    assert r.exit_code == 0 and "a.png: 1 blade, 1 tower, 1 nacelle (dropped 1 contour(s) <= 20 px)" in r.stdout
     r = cli("contours", p, "--area-threshold", "1e6")
     assert r.exit_code == 5
     assert r.stderr.count("\n") == 1 and "no contour above the area threshold" in r.stderr

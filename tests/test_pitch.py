@@ -247,6 +247,28 @@ def test_blade_counts_are_clear_errors():
         measure_pitch(no_blades)
 
 
+@pytest.mark.parametrize("with_nacelles", [True, False])
+def test_the_main_rotor_is_picked_among_several_turbines(with_nacelles):
+    """A photo with far turbines behind the inspected one (as the sample renders have): the
+    rotor whose blades cover the most pixels is measured, the others are listed, not counted."""
+    h, w = 400, 500
+    main = rotor(h, w, [20, 140, 260], 14, hub=(300, 220), length=150, nacelle=with_nacelles)
+    far = rotor(h, w, [70, 190, 310], 5, hub=(80, 80), length=55, nacelle=with_nacelles, start=6)
+    stray = make_blade_mask(h, w, 45, 6, length=40, hub=(450, 360), start=0)
+    inst = Instances(np.concatenate([main.labels, far.labels, ["blade"]]),
+                     np.concatenate([main.masks, far.masks, stray[None]]))
+    res = pitch_from_instances(inst)
+    assert sorted(round(p) for p in res.phis) == [20, 140, 260]
+    n_main = len(main)
+    assert sorted(res.other_rotor_blades) == [n_main, n_main + 1, n_main + 2, len(inst) - 1]
+    assert np.hypot(res.hub_px[0] - 300, res.hub_px[1] - 220) < 1.5
+    # A fourth blade on the main rotor is still four blades.
+    extra = make_blade_mask(h, w, 80, 14, length=150, hub=(300, 220))
+    four = Instances(np.concatenate([inst.labels, ["blade"]]), np.concatenate([inst.masks, extra[None]]))
+    with pytest.raises(PerceptionError, match=r"found 4 blades in .*besides 4 blade\(s\) of other"):
+        pitch_from_instances(four)
+
+
 def test_two_opposite_blades_without_nacelle_use_their_common_end():
     cs = find_contours(rotor(240, 240, [30, 210], 12, length=100, nacelle=False), 50)
     res = measure_pitch(cs, 2)

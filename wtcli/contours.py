@@ -30,7 +30,7 @@ from wtcli.masks import LABELS, Instances, read_instances
 
 CONTOURS_SCHEMA = "wtinspect.contours"
 CONTOURS_VERSION = 1
-DEFAULT_AREA_THRESHOLD = 100.0  # px; eq. 6's A_threshold
+DEFAULT_AREA_THRESHOLD = 20.0  # px; eq. 6 A_threshold: specks only (select_rotor drops far turbines)
 MASK_SUFFIXES = (".png", ".bmp", ".tif", ".tiff")
 
 

@@ -247,6 +247,62 @@ def nacelle_hub(nacelles: ContourSet, near: np.ndarray | None) -> np.ndarray | N
     return best
 
 
+# ---- which blades form the rotor ---------------------------------------------------------------
+def _region_centroid(inst: InstanceContours) -> np.ndarray:
+    m = cv2.moments(inst.fill().astype(np.uint8), binaryImage=True)
+    x0, y0, _, _ = inst.bbox
+    if m["m00"] <= 0:
+        return np.asarray(inst.points.mean(axis=0), float)
+    return np.array([m["m10"] / m["m00"] + x0, m["m01"] / m["m00"] + y0])
+
+
+def _supports(ax: Axis, length: float, c: np.ndarray) -> bool:
+    """Could ``c`` be this blade's hub: on its axis line, at (or a little beyond) one end?"""
+    d = np.asarray(c, float) - np.asarray(ax.centroid)
+    u = ax.direction
+    t = float(d @ u)
+    perp = abs(float(d[0] * u[1] - d[1] * u[0]))
+    if perp > 0.1 * length + 3.0:
+        return False
+    near_low = ax.t_min - 0.5 * length <= t <= ax.t_min + 0.25 * length
+    near_high = ax.t_max - 0.25 * length <= t <= ax.t_max + 0.5 * length
+    return near_low or near_high
+
+
+def select_rotor(axes: list[Axis], areas: list[float],
+                 nacelle_points: list[np.ndarray]) -> tuple[list[int], np.ndarray | None]:
+    """The blades of the main rotor when a photo shows several turbines.
+
+    Candidate hubs are the nacelle centroids and the crossing points of pairs of blade axes
+    that lie near an end of both blades; each candidate is supported by the blades whose axis
+    passes through it near one of their ends. The candidate whose supporting blades cover the
+    most pixels wins (the inspected turbine is the nearest, largest one). Without any candidate
+    (one blade; two in line and no nacelle) every blade is kept."""
+    n = len(axes)
+    lengths = [ax.t_max - ax.t_min for ax in axes]
+    cands = [np.asarray(p, float) for p in nacelle_points]
+    for i in range(n):
+        for j in range(i + 1, n):
+            ui, uj = axes[i].direction, axes[j].direction
+            cross = ui[0] * uj[1] - ui[1] * uj[0]
+            if abs(cross) < math.sin(math.radians(10)):
+                continue
+            d = np.asarray(axes[j].centroid) - np.asarray(axes[i].centroid)
+            ti = (d[0] * uj[1] - d[1] * uj[0]) / cross
+            x = np.asarray(axes[i].centroid) + ti * ui
+            if _supports(axes[i], lengths[i], x) and _supports(axes[j], lengths[j], x):
+                cands.append(x)
+    best, best_key, best_c = list(range(n)), None, None
+    for c in cands:
+        sup = [k for k in range(n) if _supports(axes[k], lengths[k], c)]
+        if not sup:
+            continue
+        key = (sum(areas[k] for k in sup), len(sup))
+        if best_key is None or key > best_key:
+            best, best_key, best_c = sup, key, c
+    return best, best_c
+
+
 # ---- typed result --------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class BladePitch:
@@ -306,6 +362,7 @@ class PitchResult:
     source: str = ""
     area_threshold: float = DEFAULT_AREA_THRESHOLD
     axes_convergence_px: tuple[float, float] | None = None
+    other_rotor_blades: tuple[int, ...] = ()  # source indices of blades of other turbines
     contours: ContourSet | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -337,6 +394,7 @@ class PitchResult:
                 "hub_px": list(self.hub_px), "hub_source": self.hub_source,
                 "axes_convergence_px": (None if self.axes_convergence_px is None
                                         else list(self.axes_convergence_px)),
+                "other_rotor_blades": list(self.other_rotor_blades),
                 "blades": [b.to_dict() for b in self.blades]}
 
     @classmethod
@@ -345,7 +403,8 @@ class PitchResult:
         return cls(tuple(BladePitch.from_dict(b) for b in d["blades"]), tuple(d["hub_px"]),
                    d["hub_source"], tuple(d["image_size"]), d.get("image") or {}, source,
                    float(d.get("area_threshold", DEFAULT_AREA_THRESHOLD)),
-                   None if conv is None else tuple(conv))
+                   None if conv is None else tuple(conv),
+                   tuple(int(i) for i in d.get("other_rotor_blades", ())))
 
 
 # ---- measuring -----------------------------------------------------------------------------------
@@ -365,14 +424,23 @@ def measure_pitch(contours: ContourSet, expected_blades: int | None = 3) -> Pitc
     (None or 0: any count >= 1)."""
     if expected_blades is not None and expected_blades < 0:
         raise ValueError(f"expected_blades must be >= 0, got {expected_blades}")
-    blades = contours.of("blade")
-    check_blade_count(len(blades), expected_blades, contours.name, contours.dropped)
+    all_blades = contours.of("blade")
+    check_blade_count(len(all_blades), None, contours.name, contours.dropped)
+    all_axes = [principal_axis(b) for b in all_blades]
+    nacelles = contours.of("nacelle")
+    keep, candidate = select_rotor(all_axes, [float(b.area) for b in all_blades],
+                                   [_region_centroid(n) for n in nacelles])
+    blades = all_blades[keep]
+    others = tuple(all_blades.instances[i].source_index for i in range(len(all_blades))
+                   if i not in keep)
+    where = contours.name + (f" (besides {len(others)} blade(s) of other rotors)" if others else "")
+    check_blade_count(len(blades), expected_blades, where, contours.dropped)
+    axes = [all_axes[i] for i in keep]
     rects = [rect_eq7(b.points) for b in blades]
-    axes = [principal_axis(b) for b in blades]
     lengths = [ax.t_max - ax.t_min for ax in axes]
 
     conv = axes_convergence(axes, lengths)
-    hub = nacelle_hub(contours.of("nacelle"), conv)
+    hub = nacelle_hub(nacelles, conv if conv is not None else candidate)
     if hub is not None:
         source = "nacelle"
     elif conv is not None:
@@ -395,7 +463,8 @@ def measure_pitch(contours: ContourSet, expected_blades: int | None = 3) -> Pitc
             (float(tip[0]), float(tip[1])), ax.centroid, ax.elongation))
     return PitchResult(tuple(out), (float(hub[0]), float(hub[1])), source, contours.image_size,
                        contours.image, contours.source, contours.area_threshold,
-                       None if conv is None else (float(conv[0]), float(conv[1])), contours)
+                       None if conv is None else (float(conv[0]), float(conv[1])), others,
+                       contours)
 
 
 def pitch_from_instances(instances: Instances, area_threshold: float = DEFAULT_AREA_THRESHOLD,

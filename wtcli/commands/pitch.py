@@ -28,7 +28,7 @@ def register(app: typer.Typer) -> None:
                  "or mask PNGs of one image (one binary PNG per instance, or a label PNG)."),
         area_threshold: Optional[float] = typer.Option(
             None, "--area-threshold", min=0, metavar="PX",
-            help="Eq. 6 threshold in pixels (default 100; a contours JSON keeps its own)."),
+            help="Eq. 6 threshold in pixels (default 20; a contours JSON keeps its own)."),
         blades: int = typer.Option(3, "--blades", min=0,
                                    help="Expected blades per image; 0 accepts any count."),
         out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write the pitch JSON here."),
