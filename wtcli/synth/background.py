@@ -39,8 +39,10 @@ def _jitter(rng: np.random.Generator, c, amount: float = 0.04) -> np.ndarray:
 
 
 def _remap_wrap(tile: np.ndarray, mx: np.ndarray, my: np.ndarray) -> np.ndarray:
-    size = tile.shape[0]
-    return cv2.remap(tile, np.mod(mx, size).astype(np.float32), np.mod(my, size).astype(np.float32),
+    size = np.float32(tile.shape[0])
+    mx = np.asarray(mx, np.float32)
+    my = np.asarray(my, np.float32)
+    return cv2.remap(tile, mx - np.floor(mx / size) * size, my - np.floor(my / size) * size,
                      cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
 
 
@@ -54,12 +56,26 @@ def sun_direction(env: Environment) -> np.ndarray:
     return np.array([math.sin(a) * math.cos(e), math.cos(a) * math.cos(e), math.sin(e)])
 
 
+def pixel_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unit viewing directions (world x, y, z components, each float32 (H, W)) of every pixel.
+
+    From ``Camera.rays`` at three pixels: a ray scaled to unit depth along the view axis is
+    affine in (u, v), so the whole grid follows exactly from those three."""
+    H, W = camera.height_px, camera.width_px
+    r = camera.rays(np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]))
+    r = r / (r @ camera.forward)[:, None]
+    du, dv = (r[1] - r[0]).astype(np.float32), (r[2] - r[0]).astype(np.float32)
+    us = np.arange(W, dtype=np.float32)[None, :]
+    vs = np.arange(H, dtype=np.float32)[:, None]
+    comps = [r[0, i].astype(np.float32) + us * du[i] + vs * dv[i] for i in range(3)]
+    inv = 1.0 / np.sqrt(comps[0] ** 2 + comps[1] ** 2 + comps[2] ** 2)
+    return comps[0] * inv, comps[1] * inv, comps[2] * inv
+
+
 def render_background(camera: Camera, env: Environment, turbine: Turbine,
                       rng: np.random.Generator, zenith: np.ndarray, horizon: np.ndarray) -> np.ndarray:
     H, W = camera.height_px, camera.width_px
-    vs, us = np.mgrid[0:H, 0:W]
-    d = camera.rays(np.stack([us.ravel(), vs.ravel()], 1)).astype(np.float32)
-    dx, dy, dz = (d[:, i].reshape(H, W) for i in range(3))
+    dx, dy, dz = pixel_rays(camera)
     sun = sun_direction(env).astype(np.float32)
     cos_sun = dx * sun[0] + dy * sun[1] + dz * sun[2]
     elev = np.degrees(np.arcsin(np.clip(dz, -1, 1)))
@@ -87,6 +103,10 @@ def render_background(camera: Camera, env: Environment, turbine: Turbine,
     cn = _remap_wrap(cloud_tile, cx_, cy_)
     sn = _remap_wrap(shade_tile, cx_ * 1.7, cy_ * 1.7)
     cov = env.cloud_cover
+    # Towards the horizon the cloud plane's texture shrinks below a pixel: fade to its mean.
+    detail = smoothstep(0.03, 0.3, dz)
+    cn = cn * detail + 0.5 * (1 - detail)
+    sn = sn * detail + 0.5 * (1 - detail)
     dens = smoothstep(1.0 - cov - 0.15, 1.0 - cov + 0.25, cn) * smoothstep(0.01, 0.18, dz) * up
     if env.sky == "overcast":
         dens = np.maximum(dens, 0.85 * smoothstep(0.0, 0.05, dz))
@@ -148,46 +168,49 @@ def _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img
         land = bc[i0] * (1 - f) + bc[i1] * f
     bright = tile_fbm(rng, T, int(rng.integers(6, 14)), octaves=3)
     land = land * (0.8 + 0.4 * bright[..., None])
+    # 4th channel: how bushy the land is here (patches of dense scrub, bare slopes).
+    density = 0.25 + 0.75 * tile_fbm(rng, T, int(rng.integers(4, 12)), octaves=4)
+    land = np.ascontiguousarray(np.dstack([land, density]).astype(np.float32))
     # Dirt roads and the gravel pad at the turbine's foot, drawn into the land tile.
-    road = np.array(_jitter(rng, (0.62, 0.72, 0.78), 0.04), np.float32)
-    bx, by = turbine.base[0] / mL, turbine.base[1] / mL
-    land = np.ascontiguousarray(land)
-    for _ in range(int(rng.integers(1, 4))):
+    road = tuple(float(x) for x in _jitter(rng, (0.60, 0.70, 0.76), 0.04)) + (0.0,)
+    bx, by = turbine.base[0] / mL, -turbine.base[1] / mL
+    for _ in range(int(rng.integers(0, 4))):
         pts = [(bx, by)]
         ang = rng.uniform(0, 2 * math.pi)
-        for _ in range(int(rng.integers(6, 14))):
-            ang += rng.normal(0, 0.5)
-            step = rng.uniform(8, 25)
+        for _ in range(int(rng.integers(8, 20))):
+            ang += rng.normal(0, 0.35)
+            step = rng.uniform(6, 16)
             pts.append((pts[-1][0] + step * math.cos(ang), pts[-1][1] + step * math.sin(ang)))
-        p = np.mod(np.asarray(pts), T).astype(np.int32)
+        p = np.round(np.mod(np.asarray(pts), T) * 16).astype(np.int32)
         for a, b in zip(p[:-1], p[1:]):
-            if np.abs(a - b).max() < T / 2:
-                cv2.line(land, tuple(int(x) for x in a), tuple(int(x) for x in b),
-                         tuple(float(x) for x in road), 1, cv2.LINE_AA)
+            if np.abs(a - b).max() < T * 8:
+                cv2.line(land, tuple(int(x) for x in a), tuple(int(x) for x in b), road, 1,
+                         cv2.LINE_AA, shift=4)
     pad = max(1, int(round(float(rng.uniform(12, 30)) / mL)))
-    cv2.circle(land, (int(bx) % T, int(by) % T), pad, tuple(float(x) for x in road), -1, cv2.LINE_AA)
+    cv2.circle(land, (int(bx) % T, int(by) % T), pad, road, -1, cv2.LINE_AA)
     land_blur = cv2.GaussianBlur(land, (0, 0), 3)
 
-    # Bushes / trees / crop rows: a fine tile, ~0.4-1 m per texel.
+    # Bushes / trees / crop texture: a fine tile, ~0.4-1 m per texel (bushes of 1.5-5 m).
     TF = 512
     mF = float(rng.uniform(0.4, 1.0))
-    bush = tile_fbm(rng, TF, int(rng.integers(24, 64)), octaves=3, gain=0.6)
-    amount = {"scrub": 0.65, "fields": 0.25, "forest": 0.8, "dry": 0.35}[env.ground]
-    thr = float(rng.uniform(0.45, 0.65))
-    bmask = smoothstep(thr, thr + 0.12, bush) * amount
-    fine = tile_fbm(rng, TF, 96, octaves=2)
+    bush = tile_fbm(rng, TF, int(rng.integers(80, 160)), octaves=2, gain=0.5)
+    fine = tile_fbm(rng, TF, 160, octaves=2)
+    fine_tile = np.ascontiguousarray(np.dstack([bush, fine]))
+    amount = {"scrub": 0.8, "fields": 0.3, "forest": 0.9, "dry": 0.45}[env.ground]
+    thr = float(rng.uniform(0.45, 0.62))
+    cover = float(smoothstep(thr, thr + 0.1, bush).mean())
 
     # Metres per pixel on the ground: picks texture detail vs its average (no aliasing).
     foot = tt / camera.fx / np.sqrt(np.maximum(-dz, 0.02))
-    w_fine = np.clip(1.6 * mF / np.maximum(foot, 1e-6), 0, 1)
-    w_land = np.clip(1.5 * mL / np.maximum(foot, 1e-6), 0, 1)
+    w_fine = np.clip(1.2 * mF / np.maximum(foot, 1e-6), 0, 1)
+    w_land = np.clip(1.5 * mL / np.maximum(foot, 1e-6), 0, 1)[..., None]
     lx, ly = X / mL, -Y / mL
-    lc = _remap_wrap(land, lx, ly) * w_land[..., None] + \
-        _remap_wrap(land_blur, lx, ly) * (1 - w_land[..., None])
-    fx_, fy_ = X / mF, -Y / mF
-    bm = _remap_wrap(bmask, fx_, fy_) * w_fine + float(bmask.mean()) * (1 - w_fine)
-    fn = _remap_wrap(fine, fx_, fy_) * w_fine + float(fine.mean()) * (1 - w_fine)
-    col = lc * (1 - bm[..., None]) + bush_col * bm[..., None]
+    lc = _remap_wrap(land, lx, ly) * w_land + _remap_wrap(land_blur, lx, ly) * (1 - w_land)
+    fs = _remap_wrap(fine_tile, X / mF, -Y / mF)
+    bm = smoothstep(thr, thr + 0.1, fs[..., 0]) * w_fine + cover * (1 - w_fine)
+    bm = bm * amount * lc[..., 3]
+    fn = fs[..., 1] * w_fine + 0.5 * (1 - w_fine)
+    col = lc[..., :3] * (1 - bm[..., None]) + bush_col * bm[..., None]
     col = col * (0.85 + 0.3 * fn[..., None])
     # Light: sun on flat ground, sky light everywhere.
     light = 0.5 + 0.6 * env.sun_strength * max(math.sin(math.radians(env.sun_elevation_deg)), 0.1)
@@ -211,9 +234,9 @@ def _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img
         # Sun glitter: reflection of the sun on waves.
         sun = sun_direction(env)
         refl = dx * sun[0] + dy * sun[1] - dz * sun[2]
-        waves = _remap_wrap(fine, X / 3.0, Y / 1.0)
-        glit = env.sun_strength * np.exp((refl - 1) / 0.01) * (0.5 + waves)
-        sea_col = sea_col + glit[..., None] * 0.9
+        waves = _remap_wrap(fine, X / 2.0, Y / 0.7)
+        glit = env.sun_strength * np.exp((refl - 1) / 0.004) * smoothstep(0.55, 0.8, waves)
+        sea_col = sea_col + glit[..., None] * 0.8
         shore = sea & (along < coast + 15)
         sea_col[shore] = sea_col[shore] * 0.6 + 0.3
         col = np.where(sea[..., None], sea_col, col)
@@ -230,8 +253,8 @@ def _hills(camera, env, rng, dz, elev, az, horizon, img):
     hcam = float(camera.position[2])
     far = None
     for layer in range(env.hills):
-        D = float(rng.uniform(6000, 15000)) if layer == 0 else float(rng.uniform(2500, 6000))
-        height = float(rng.uniform(150, 700)) if layer == 0 else float(rng.uniform(60, 300))
+        D = float(rng.uniform(5000, 15000)) if layer == 0 else float(rng.uniform(1200, 4500))
+        height = float(rng.uniform(150, 800)) if layer == 0 else float(rng.uniform(60, 350))
         prof = noise_1d(rng, 3600, int(rng.integers(3, 12)), octaves=6, gain=0.5)
         prof = np.clip((prof - 0.35) / 0.65, 0, 1) ** float(rng.uniform(0.8, 1.6))
         ridge = np.degrees(np.arctan((height * prof - hcam) / D))

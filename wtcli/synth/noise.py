@@ -34,13 +34,18 @@ def fbm(rng: np.random.Generator, h: int, w: int, cells: float, octaves: int = 4
 
 
 def tile_noise(rng: np.random.Generator, size: int, cells: int) -> np.ndarray:
-    """Tileable value noise in [0, 1], float32 (size, size): a random periodic grid, tiled 3x3,
-    interpolated, centre cut out (the cubic kernel sees the same neighbours across the seams)."""
+    """Tileable value noise in [0, 1], float32 (size, size): a random periodic grid of
+    ``cells`` x ``cells`` values, bicubically interpolated with wrap-around borders."""
     cells = max(2, int(cells))
     g = rng.random((cells, cells), dtype=np.float32)
-    big = np.tile(g, (3, 3))
-    up = cv2.resize(big, (3 * size, 3 * size), interpolation=cv2.INTER_CUBIC)
-    return np.clip(up[size:2 * size, size:2 * size], 0.0, 1.0)
+    work = min(size, max(32, 8 * cells))  # coarse octaves: interpolate small, then enlarge
+    x = ((np.arange(work, dtype=np.float32) + 0.5) * (cells / work) - 0.5)
+    mx = np.ascontiguousarray(np.broadcast_to(x[None, :], (work, work)))
+    my = np.ascontiguousarray(np.broadcast_to(x[:, None], (work, work)))
+    up = cv2.remap(g, mx, my, cv2.INTER_CUBIC, borderMode=cv2.BORDER_WRAP)
+    if work < size:
+        up = cv2.resize(up, (size, size), interpolation=cv2.INTER_LINEAR)
+    return np.clip(up, 0.0, 1.0)
 
 
 def tile_fbm(rng: np.random.Generator, size: int, cells: int, octaves: int = 4,
@@ -56,8 +61,8 @@ def tile_fbm(rng: np.random.Generator, size: int, cells: int, octaves: int = 4,
         amp *= gain
     out /= total
     # Sums of octaves cluster around 0.5: stretch back to roughly [0, 1].
-    lo, hi = np.percentile(out, [1, 99])
-    return np.clip((out - lo) / max(hi - lo, 1e-6), 0.0, 1.0)
+    m, sd = float(out.mean()), float(out.std())
+    return np.clip((out - m) / max(4.6 * sd, 1e-6) + 0.5, 0.0, 1.0)
 
 
 def noise_1d(rng: np.random.Generator, n: int, cells: int, octaves: int = 4,

@@ -224,29 +224,37 @@ def _shade(turbines, owner, local, centroid, normal, to_cam, depth, env, rng, ze
 
 
 def _instances(part2: np.ndarray, turbines, width: int, height: int):
-    """Labelled masks at the output resolution: a pixel belongs to a part when that part covers
-    at least half of it at the supersampled resolution."""
+    """Labelled masks at the output resolution: a pixel belongs to the part that covers most of
+    it at the supersampled resolution, if that part covers at least half of it."""
     ss = SUPERSAMPLE
     minpix = min_instance_pixels(width, height)
-    labels, masks, owners = [], [], []
     counts = np.bincount(part2.ravel() + 1)
+    cand, info = [], []
     gid = 0
     for j, t in enumerate(turbines):
         n = t.n_blades
         for p in range(n + 2):
             g = gid + p
             if g + 1 < len(counts) and counts[g + 1] >= minpix * ss * ss * 0.5:
-                cov = cv2.resize((part2 == g).astype(np.float32), (width, height),
-                                 interpolation=cv2.INTER_AREA)
-                m = cov >= 0.5
-                if int(m.sum()) >= minpix:
-                    labels.append("blade" if p < n else ("tower" if p == n else "nacelle"))
-                    masks.append(m)
-                    owners.append({"turbine": j, "turbine_id": t.id,
-                                   "blade": p if p < n else None})
+                cand.append(g)
+                info.append(("blade" if p < n else ("tower" if p == n else "nacelle"),
+                             {"turbine": j, "turbine_id": t.id, "blade": p if p < n else None}))
         gid += n + 2
+    if not cand:
+        return Instances.empty(height, width), []
+    cov = np.stack([cv2.resize((part2 == g).astype(np.float32), (width, height),
+                               interpolation=cv2.INTER_AREA) for g in cand])
+    best = np.argmax(cov, axis=0)
+    owned = np.take_along_axis(cov, best[None], 0)[0] >= 0.5
+    labels, masks, owners = [], [], []
+    for i, (label, owner) in enumerate(info):
+        m = owned & (best == i)
+        if int(m.sum()) >= minpix:
+            labels.append(label)
+            masks.append(m)
+            owners.append(owner)
     if not labels:
-        return Instances.empty(height, width), owners
+        return Instances.empty(height, width), []
     return Instances(np.array(labels, dtype=object), np.stack(masks)), owners
 
 

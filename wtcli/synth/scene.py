@@ -136,7 +136,7 @@ def sample_scene(rng: np.random.Generator, width: int, height: int, view: str | 
     dist = turbine.rotor_diameter * cam0.fx / (fill * height)
     hub = turbine.hub_center
     # Camera height: drones fly from a little below to well above the hub; never too low.
-    elev = float(rng.uniform(-28.0, 30.0)) if rng.random() < 0.85 else float(rng.uniform(30, 50))
+    elev = float(rng.uniform(-25.0, 20.0)) if rng.random() < 0.88 else float(rng.uniform(20, 45))
     heading = math.radians(turbine.yaw_deg + offset)
     horiz = np.array([math.sin(heading), math.cos(heading), 0.0])
     pos = hub + dist * (math.cos(math.radians(elev)) * horiz
@@ -224,5 +224,5 @@ def _sample_environment(rng: np.random.Generator, turbine: Turbine, camera: Came
         sky=sky, sun_azimuth_deg=float(sun_az % 360), sun_elevation_deg=float(sun_el),
         sun_strength=float(strength), backlit=bool(backlit), visibility_m=float(vis),
         cloud_cover=float(cover), ground=ground, sea_distance_m=sea_d,
-        sea_bearing_deg=float(sea_bearing % 360), hills=int(rng.choice([0, 1, 2], p=[0.2, 0.4, 0.4])),
+        sea_bearing_deg=float(sea_bearing % 360), hills=int(rng.choice([0, 1, 2], p=[0.15, 0.35, 0.5])),
         turbine_albedo=albedo, tip_bands=bool(rng.random() < 0.12), logo=bool(rng.random() < 0.5))

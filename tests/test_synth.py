@@ -1,0 +1,166 @@
+"""The synthetic renderer: determinism, masks that agree with the ground truth, files that round
+trip, and the `wtinspect synth` command's exit codes and clean --json."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from wtcli.errors import ExitCode
+from wtcli.masks import read_instances
+from wtcli.synth import SynthSample, blade_class, render_dataset, render_sample, sample_seed
+
+W, H = 320, 240
+
+
+@pytest.fixture(scope="module")
+def front_samples():
+    return [render_sample(s, W, H, view="front") for s in range(8)]
+
+
+def test_same_seed_same_bytes():
+    a, b = render_sample(11, W, H), render_sample(11, W, H)
+    assert a.image.tobytes() == b.image.tobytes()
+    assert np.array_equal(a.instances.masks, b.instances.masks)
+    assert list(a.instances.labels) == list(b.instances.labels)
+    assert json.dumps(a.truth, sort_keys=True) == json.dumps(b.truth, sort_keys=True)
+
+
+def test_different_seeds_differ():
+    a, b = render_sample(1, W, H), render_sample(2, W, H)
+    assert a.image.tobytes() != b.image.tobytes()
+    assert a.truth["turbine"] != b.truth["turbine"]
+
+
+def test_view_size_and_types():
+    for view in ("front", "oblique", "side", "rear"):
+        s = render_sample(3, 200, 150, view=view)
+        assert isinstance(s, SynthSample)
+        assert s.image.shape == (150, 200, 3) and s.image.dtype == np.uint8
+        assert s.instances.masks.shape[1:] == (150, 200)
+        assert s.truth["view"] == view
+        assert set(s.instances.labels) <= {"blade", "tower", "nacelle"}
+
+
+def test_bad_arguments_raise_value_error():
+    with pytest.raises(ValueError, match="seed"):
+        render_sample(-1)
+    with pytest.raises(ValueError, match="view"):
+        render_sample(0, view="top")
+    with pytest.raises(ValueError, match="width"):
+        render_sample(0, 8, 8)
+
+
+def test_truth_angles_in_range_and_classes(front_samples):
+    for s in front_samples:
+        assert len(s.truth["blades"]) == 3
+        for b in s.truth["blades"]:
+            assert 0 <= b["theta_deg"] < 180 and 0 <= b["phi_deg"] < 360
+            assert math.isclose(b["theta_deg"], b["phi_deg"] % 180, abs_tol=1e-9)
+            assert b["class"] == blade_class(b["theta_deg"])
+
+
+def test_blade_classes_follow_the_paper_intervals():
+    assert [blade_class(t) for t in (0, 30, 30.1, 60, 60.1, 119.9, 120, 149.9, 150, 179.9)] == [
+        "horizontal", "horizontal", "acute", "acute", "vertical", "vertical", "acute", "acute",
+        "horizontal", "horizontal"]
+
+
+def _main_blades(s):
+    owners = s.truth["instances"]
+    return {o["blade"]: s.instances.masks[i] for i, o in enumerate(owners)
+            if o["turbine"] == 0 and o["blade"] is not None}
+
+
+def test_front_views_with_whole_rotor_show_three_blades(front_samples):
+    checked = 0
+    for s in front_samples:
+        if s.truth["blades_whole_in_frame"] == 3:
+            assert s.truth["blades_visible"] == 3
+            assert len(_main_blades(s)) == 3
+            checked += 1
+    assert checked >= 2
+
+
+def test_blade_masks_point_where_the_truth_says(front_samples):
+    checked = 0
+    for s in front_samples:
+        hub = np.array(s.truth["hub_px"])
+        for k, m in _main_blades(s).items():
+            b = s.truth["blades"][k]
+            if m.sum() < 150 or not b["tip_in_frame"]:
+                continue
+            ys, xs = np.nonzero(m)
+            pts = np.stack([xs, ys], 1).astype(float)
+            c = pts.mean(0)
+            evals, evecs = np.linalg.eigh(np.cov((pts - c).T))
+            v = evecs[:, -1]
+            if v @ (c - hub) < 0:  # orient hub -> blade
+                v = -v
+            phi = math.degrees(math.atan2(-v[1], v[0])) % 360
+            err = abs((phi - b["phi_deg"] + 180) % 360 - 180)
+            assert err < 10, (s.truth["seed"], k, phi, b["phi_deg"])
+            checked += 1
+    assert checked >= 6
+
+
+def test_masks_do_not_overlap_and_sit_where_the_image_changes():
+    s = render_sample(5, W, H, view="front")
+    assert s.instances.masks.sum(0).max() <= 1  # one owner per pixel (occlusion respected)
+    assert len(s.instances) >= 3
+
+
+def test_dataset_files_round_trip(tmp_path):
+    summary = render_dataset(tmp_path / "ds", 3, seed=4, width=160, height=120, progress=False)
+    assert summary["images"] == 3
+    rows = read_instances(tmp_path / "ds" / "instances.json")
+    assert [img["file_name"] for img, _ in rows] == [f"images/{i:05d}.jpg" for i in range(3)]
+    gt = json.loads((tmp_path / "ds" / "ground_truth.json").read_text())
+    assert gt["schema"] == "wtinspect.synth_truth" and gt["schema_version"] == 1
+    for i, (img, inst) in enumerate(rows):
+        again = render_sample(sample_seed(4, i), 160, 120)
+        assert np.array_equal(inst.masks, again.instances.masks)
+        assert list(inst.labels) == list(again.instances.labels)
+        truth = gt["images"][img["file_name"]]
+        assert truth["seed"] == sample_seed(4, i)
+        assert len(truth["instances"]) == len(inst)
+        assert (tmp_path / "ds" / img["file_name"]).stat().st_size > 1000
+
+
+def test_cli_json_summary_is_clean(cli, tmp_path):
+    r = cli("synth", tmp_path / "out", "--count", 2, "--seed", 7, "--width", 96, "--height", 64,
+            "--json")
+    assert r.exit_code == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert doc["schema"] == "wtinspect.synth_summary" and doc["images"] == 2
+    assert (tmp_path / "out" / "images" / "00001.jpg").exists()
+
+
+def test_cli_same_seed_same_files(cli, tmp_path):
+    for name in ("a", "b"):
+        assert cli("synth", tmp_path / name, "-n", 2, "-s", 3, "--width", 96, "--height", 64,
+                   "--view", "front").exit_code == 0
+    for f in ("images/00000.jpg", "images/00001.jpg", "instances.json"):
+        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes()
+
+
+@pytest.mark.parametrize("args, code, words", [
+    (["--count", "0"], ExitCode.CONFIG, "--count"),
+    (["--seed", "-3"], ExitCode.CONFIG, "--seed"),
+    (["--width", "5"], ExitCode.CONFIG, "--width"),
+    (["--view", "top"], ExitCode.CONFIG, "--view"),
+])
+def test_cli_bad_options(cli, tmp_path, args, code, words):
+    r = cli("synth", tmp_path / "o", *args)
+    assert r.exit_code == code and words in r.stderr and r.stdout == ""
+    assert len(r.stderr.strip().splitlines()) == 1
+
+
+def test_cli_out_is_a_file(cli, tmp_path):
+    f = tmp_path / "file.txt"
+    f.write_text("x")
+    r = cli("synth", f, "--count", 1)
+    assert r.exit_code == ExitCode.INPUT and "not a folder" in r.stderr
