@@ -1,0 +1,12 @@
+"""`plan`: turbines.yaml + blade angles -> a safe, timed inspection plan (paper steps 1.1, 1.5).
+
+Where things are:
+
+* ``config.py``  turbines.yaml -> a validated, frozen ``Mission`` (``load_mission``)
+* ``zone.py``    eq. 1-3: zone sphere C_i/R_i, initial point S_p; blade angles from a photo -> 3D
+* ``paths.py``   eq. 8-9: passes along each blade side, tower and nacelle trajectories, arcs
+* ``safety.py``  clearance of points and legs to every part of every turbine, and the ground
+* ``mission.py`` ``plan_mission``: order, fleet split, batteries, timing, checks, coverage
+* ``exports.py`` QGroundControl .plan, MAVLink QGC WPL 110, GeoJSON
+* ``picture.py`` front/side/top views of the path (PNG)
+"""

@@ -1,0 +1,395 @@
+"""``turbines.yaml`` -> a frozen, validated ``Mission`` (docs/turbines-yaml.md).
+
+The packaged ``wtcli/data/turbines-defaults.yaml`` (commented) is merged under the user's file,
+every key is checked (unknown keys get a "did you mean" hint, values name their allowed range),
+then the result is frozen. A ``Mission`` can also be built in code, or from a dict with
+``mission_from_dict``.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from wtcli.errors import ConfigError
+from wtcli.geometry import Camera, Turbine
+from wtcli.plan.geodesy import geodetic_to_enu
+from wtcli.yamlcheck import (check_keys, choice, load_yaml, need_mapping, number, string,
+                             vector)
+
+DEFAULTS_PATH = Path(__file__).resolve().parents[1] / "data" / "turbines-defaults.yaml"
+
+TOP_KEYS = ("site", "camera", "fleet", "mission", "turbines")
+CAMERA_KEYS = ("sensor_width_mm", "focal_mm", "width_px", "height_px")
+FLEET_KEYS = ("uavs", "launch", "inspection_speed_m_s", "cruise_speed_m_s", "max_speed_m_s",
+              "climb_rate_m_s", "battery_minutes", "battery_reserve_minutes", "battery_swap_s")
+MISSION_KEYS = ("safe_distance_m", "tracking_margin_m", "target_gsd_mm", "overlap",
+                "max_incidence_deg", "min_altitude_m", "takeoff_altitude_m", "min_side_coverage",
+                "coverage_spacing_m", "inspect_tower", "inspect_nacelle", "tower_columns",
+                "allow_coarser_gsd")
+TURBINE_KEYS = ("id", "position", "lat", "lon", "alt", "hub_height_m", "rotor_diameter_m",
+                "blades", "yaw_deg", "blade_azimuths_deg", "rotor_azimuth_deg", "blade_pitch_deg",
+                "tower", "nacelle", "hub_radius_m", "overhang_m", "blade_tips", "photo",
+                "camera_pose")
+TOWER_KEYS = ("base_radius_m", "top_radius_m")
+NACELLE_KEYS = ("length_m", "width_m", "height_m")
+POSE_KEYS = ("position", "look_at", "roll_deg")
+
+
+@dataclass(frozen=True)
+class Fleet:
+    uavs: tuple[str, ...] = ("UAV1",)
+    launch: tuple[float, float, float] | None = None  # ENU m on the ground; None = automatic
+    inspection_speed_m_s: float = 2.0
+    cruise_speed_m_s: float = 8.0
+    max_speed_m_s: float = 12.0
+    climb_rate_m_s: float = 3.0
+    battery_minutes: float = 25.0
+    battery_reserve_minutes: float = 5.0
+    battery_swap_s: float = 180.0
+
+    def __post_init__(self) -> None:
+        if not self.uavs or len(set(self.uavs)) != len(self.uavs):
+            raise ValueError(f"expected unique UAV ids, got {self.uavs}")
+        for name in ("inspection_speed_m_s", "cruise_speed_m_s", "max_speed_m_s", "climb_rate_m_s"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"expected {name} > 0, got {getattr(self, name)}")
+        if self.battery_minutes <= self.battery_reserve_minutes:
+            raise ValueError(f"expected battery_minutes ({self.battery_minutes}) > "
+                             f"battery_reserve_minutes ({self.battery_reserve_minutes})")
+        if self.launch is not None:
+            object.__setattr__(self, "launch", tuple(float(v) for v in self.launch))
+
+    @property
+    def usable_battery_s(self) -> float:
+        return 60.0 * (self.battery_minutes - self.battery_reserve_minutes)
+
+
+@dataclass(frozen=True)
+class Settings:
+    safe_distance_m: float = 3.0
+    tracking_margin_m: float = 1.0
+    target_gsd_mm: float = 1.5
+    overlap: float = 0.6
+    max_incidence_deg: float = 60.0
+    min_altitude_m: float = 5.0
+    takeoff_altitude_m: float = 10.0
+    min_side_coverage: float = 0.9
+    coverage_spacing_m: float = 1.0
+    inspect_tower: bool = True
+    inspect_nacelle: bool = True
+    tower_columns: int = 0
+    allow_coarser_gsd: bool = True
+
+    def __post_init__(self) -> None:
+        if not self.safe_distance_m > 0:
+            raise ValueError(f"expected safe_distance_m > 0, got {self.safe_distance_m}")
+        if self.tracking_margin_m < 0:
+            raise ValueError(f"expected tracking_margin_m >= 0, got {self.tracking_margin_m}")
+        if not 0 <= self.overlap < 1:
+            raise ValueError(f"expected overlap in [0, 1), got {self.overlap}")
+        if not self.target_gsd_mm > 0:
+            raise ValueError(f"expected target_gsd_mm > 0, got {self.target_gsd_mm}")
+
+    @property
+    def required_clearance_m(self) -> float:
+        """What the planner keeps from every part: safe distance plus the tracking margin."""
+        return self.safe_distance_m + self.tracking_margin_m
+
+
+@dataclass(frozen=True)
+class CameraPose:
+    """Where the photo of a turbine was taken from (ENU m) and the point it looked at."""
+
+    position: tuple[float, float, float]
+    look_at: tuple[float, float, float]
+    roll_deg: float = 0.0
+
+
+@dataclass(frozen=True)
+class TurbineExtras:
+    """What a turbines.yaml entry says beyond the turbine model."""
+
+    photo: Path | None = None  # photo (or pitch JSON) of this turbine, taken from camera_pose
+    measured_tips: np.ndarray | None = None  # (N, 3) ENU m: the paper's eq. 2 input
+    camera_pose: CameraPose | None = None  # default: at S_p looking at the zone centre
+    azimuth_source: str = "default"  # yaml | tips | default (evenly spaced, blade 1 up)
+
+
+@dataclass(frozen=True)
+class Mission:
+    turbines: tuple[Turbine, ...]
+    camera: Camera  # intrinsics of the inspection camera (also the overview photo's)
+    fleet: Fleet = field(default_factory=Fleet)
+    settings: Settings = field(default_factory=Settings)
+    site_origin: dict | None = None  # {"lat", "lon", "alt"} of ENU (0, 0, 0)
+    extras: dict = field(default_factory=dict)  # turbine id -> TurbineExtras
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "turbines", tuple(self.turbines))
+        if not self.turbines:
+            raise ValueError("a mission needs at least one turbine")
+        ids = [t.id for t in self.turbines]
+        if len(set(ids)) != len(ids):
+            raise ValueError(f"expected unique turbine ids, got {ids}")
+        unknown = set(self.extras) - set(ids)
+        if unknown:
+            raise ValueError(f"extras for unknown turbines {sorted(unknown)}")
+
+    def extra(self, turbine_id: str) -> TurbineExtras:
+        return self.extras.get(turbine_id) or TurbineExtras()
+
+    def turbine(self, turbine_id: str) -> Turbine:
+        for t in self.turbines:
+            if t.id == turbine_id:
+                return t
+        raise KeyError(turbine_id)
+
+    def with_azimuths(self, azimuths: dict[str, list[float]]) -> Mission:
+        """The same mission with some turbines' blade azimuths replaced."""
+        ts = []
+        for t in self.turbines:
+            if t.id in azimuths:
+                az = tuple(float(a) for a in azimuths[t.id])
+                if len(az) != t.n_blades:
+                    raise ValueError(f"turbine {t.id!r}: expected {t.n_blades} azimuths, got {len(az)}")
+                t = replace(t, azimuths_deg=az)
+            ts.append(t)
+        return replace(self, turbines=tuple(ts))
+
+
+# ---- loading -----------------------------------------------------------------------------------
+def default_dict() -> dict:
+    return yaml.safe_load(DEFAULTS_PATH.read_text(encoding="utf-8"))
+
+
+def _merge(base: dict, over: dict) -> dict:
+    out = copy.deepcopy(base)
+    for k, v in over.items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = _merge(out[k], v)
+        else:
+            out[k] = v
+    return out
+
+
+def load_mission(path: str | Path) -> Mission:
+    """Read, merge over the packaged defaults, validate and freeze a turbines.yaml."""
+    path = Path(path)
+    data = load_yaml(path)
+    if data is None:
+        raise ConfigError(f"{path}: the file is empty")
+    return mission_from_dict(data, where=path.name, base_dir=path.parent)
+
+
+def _boolean(m: dict, key: str, where: str) -> bool:
+    v = m.get(key)
+    if not isinstance(v, bool):
+        raise ConfigError(f"{where}.{key}: expected true or false, got {v!r}")
+    return v
+
+
+def _point(m: dict, where: str, origin: dict | None, what: str) -> tuple[float, float, float]:
+    """``position: [x, y, z]`` (ENU m) or ``lat``/``lon``/``alt`` (needs site.origin)."""
+    if "position" in m and m["position"] is not None:
+        if any(k in m for k in ("lat", "lon")):
+            raise ConfigError(f"{where}: give either position or lat/lon/alt for the {what}, not both")
+        return tuple(vector(m, "position", where, 3))
+    if "lat" in m or "lon" in m:
+        if origin is None:
+            raise ConfigError(f"{where}: lat/lon needs site.origin (lat, lon, alt) to convert to "
+                              "local ENU metres")
+        lat = number(m, "lat", where, -90, 90)
+        lon = number(m, "lon", where, -180, 180)
+        alt = number(m, "alt", where, -500, 9000, default=float(origin["alt"]))
+        e = geodetic_to_enu(lat, lon, alt, origin)
+        return (float(e[0]), float(e[1]), float(e[2]))
+    raise ConfigError(f"{where}: missing the {what}: give position: [x, y, z] (ENU m) or "
+                      "lat/lon/alt")
+
+
+def mission_from_dict(d: Any, where: str = "turbines.yaml", base_dir: str | Path = ".") -> Mission:
+    """Validate a turbines.yaml mapping (merged over the packaged defaults) into a Mission."""
+    base_dir = Path(base_dir)
+    d = need_mapping(d, where)
+    check_keys(d, TOP_KEYS, where, required=("turbines",))
+    d = _merge(default_dict(), d)
+
+    # site
+    origin = None
+    site = d.get("site")
+    if site is not None:
+        w = f"{where}: site"
+        site = need_mapping(site, w)
+        check_keys(site, ("origin",), w)
+        if site.get("origin") is not None:
+            o = need_mapping(site["origin"], f"{w}.origin")
+            check_keys(o, ("lat", "lon", "alt"), f"{w}.origin", required=("lat", "lon"))
+            origin = {"lat": number(o, "lat", f"{w}.origin", -90, 90),
+                      "lon": number(o, "lon", f"{w}.origin", -180, 180),
+                      "alt": number(o, "alt", f"{w}.origin", -500, 9000, default=0.0)}
+
+    # camera
+    w = f"{where}: camera"
+    c = need_mapping(d["camera"], w)
+    check_keys(c, CAMERA_KEYS, w)
+    camera = Camera(number(c, "width_px", w, 64, 100000, integer=True),
+                    number(c, "height_px", w, 64, 100000, integer=True),
+                    number(c, "focal_mm", w, 1, 2000), number(c, "sensor_width_mm", w, 1, 100))
+
+    # mission settings
+    w = f"{where}: mission"
+    m = need_mapping(d["mission"], w)
+    check_keys(m, MISSION_KEYS, w)
+    settings = Settings(
+        safe_distance_m=number(m, "safe_distance_m", w, 0.5, 100),
+        tracking_margin_m=number(m, "tracking_margin_m", w, 0, 20),
+        target_gsd_mm=number(m, "target_gsd_mm", w, 0.1, 50),
+        overlap=number(m, "overlap", w, 0, 0.9),
+        max_incidence_deg=number(m, "max_incidence_deg", w, 10, 85),
+        min_altitude_m=number(m, "min_altitude_m", w, 0, 200),
+        takeoff_altitude_m=number(m, "takeoff_altitude_m", w, 1, 500),
+        min_side_coverage=number(m, "min_side_coverage", w, 0, 1),
+        coverage_spacing_m=number(m, "coverage_spacing_m", w, 0.2, 5),
+        inspect_tower=_boolean(m, "inspect_tower", w),
+        inspect_nacelle=_boolean(m, "inspect_nacelle", w),
+        tower_columns=number(m, "tower_columns", w, 0, 16, integer=True),
+        allow_coarser_gsd=_boolean(m, "allow_coarser_gsd", w))
+
+    # fleet
+    w = f"{where}: fleet"
+    f = need_mapping(d["fleet"], w)
+    check_keys(f, FLEET_KEYS, w)
+    uavs = f.get("uavs", 1)
+    if isinstance(uavs, int) and not isinstance(uavs, bool):
+        if not 1 <= uavs <= 50:
+            raise ConfigError(f"{w}.uavs: expected a count in [1, 50] or a list of ids, got {uavs!r}")
+        uav_ids = tuple(f"UAV{k + 1}" for k in range(uavs))
+    elif isinstance(uavs, list) and uavs and all(isinstance(u, (str, int)) and not isinstance(u, bool)
+                                                 for u in uavs):
+        uav_ids = tuple(str(u) for u in uavs)
+        if len(set(uav_ids)) != len(uav_ids):
+            raise ConfigError(f"{w}.uavs: expected unique ids, got {uavs!r}")
+    else:
+        raise ConfigError(f"{w}.uavs: expected a count in [1, 50] or a list of ids, got {uavs!r}")
+    launch = None
+    if f.get("launch") is not None:
+        lw = f"{w}.launch"
+        lm = need_mapping(f["launch"], lw)
+        check_keys(lm, ("position", "lat", "lon", "alt"), lw)
+        launch = _point(lm, lw, origin, "launch point")
+    try:
+        fleet = Fleet(
+            uavs=uav_ids, launch=launch,
+            inspection_speed_m_s=number(f, "inspection_speed_m_s", w, 0.2, 15),
+            cruise_speed_m_s=number(f, "cruise_speed_m_s", w, 0.5, 30),
+            max_speed_m_s=number(f, "max_speed_m_s", w, 0.5, 40),
+            climb_rate_m_s=number(f, "climb_rate_m_s", w, 0.2, 15),
+            battery_minutes=number(f, "battery_minutes", w, 1, 300),
+            battery_reserve_minutes=number(f, "battery_reserve_minutes", w, 0, 100),
+            battery_swap_s=number(f, "battery_swap_s", w, 0, 3600))
+    except ValueError as e:
+        raise ConfigError(f"{w}: {e}") from None
+
+    # turbines
+    ts = d["turbines"]
+    if not isinstance(ts, list) or not ts:
+        raise ConfigError(f"{where}: turbines: expected a non-empty list of turbines, got {ts!r}")
+    turbines, extras, seen = [], {}, set()
+    for i, td in enumerate(ts):
+        t, ex = _turbine(td, f"{where}: turbines[{i}]", origin, base_dir)
+        if t.id in seen:
+            raise ConfigError(f"{where}: turbines[{i}].id: duplicate turbine id {t.id!r}")
+        seen.add(t.id)
+        turbines.append(t)
+        extras[t.id] = ex
+    return Mission(tuple(turbines), camera, fleet, settings, origin, extras)
+
+
+def _turbine(td: Any, w: str, origin: dict | None, base_dir: Path) -> tuple[Turbine, TurbineExtras]:
+    td = need_mapping(td, w)
+    check_keys(td, TURBINE_KEYS, w, required=("id", "hub_height_m", "rotor_diameter_m", "yaw_deg"))
+    tid = string(td, "id", w)
+    base = _point(td, w, origin, "tower base position")
+    hub = number(td, "hub_height_m", w, 10, 250)
+    diam = number(td, "rotor_diameter_m", w, 5, 300)
+    blades = number(td, "blades", w, 1, 6, integer=True, default=3)
+    yaw = number(td, "yaw_deg", w, 0, 360)
+    pitch = number(td, "blade_pitch_deg", w, 0, 90, default=90.0)
+    kw: dict[str, Any] = {}
+    if td.get("tower") is not None:
+        tw = f"{w}.tower"
+        tm = need_mapping(td["tower"], tw)
+        check_keys(tm, TOWER_KEYS, tw)
+        kw["tower_base_radius"] = number(tm, "base_radius_m", tw, 0.2, 20, default=None)
+        kw["tower_top_radius"] = number(tm, "top_radius_m", tw, 0.2, 20, default=None)
+    if td.get("nacelle") is not None:
+        nw = f"{w}.nacelle"
+        nm = need_mapping(td["nacelle"], nw)
+        check_keys(nm, NACELLE_KEYS, nw)
+        kw["nacelle_length"] = number(nm, "length_m", nw, 1, 40, default=None)
+        kw["nacelle_width"] = number(nm, "width_m", nw, 0.5, 20, default=None)
+        kw["nacelle_height"] = number(nm, "height_m", nw, 0.5, 20, default=None)
+    kw["hub_radius"] = number(td, "hub_radius_m", w, 0.2, 10, default=None)
+    kw["overhang"] = number(td, "overhang_m", w, 0, 30, default=None)
+
+    tips = None
+    if td.get("blade_tips") is not None:
+        raw = td["blade_tips"]
+        if not isinstance(raw, list) or len(raw) != blades:
+            raise ConfigError(f"{w}.blade_tips: expected {blades} tips (one [x, y, z] per blade), "
+                              f"got {raw!r}")
+        tips = np.array([vector({"tip": p}, "tip", f"{w}.blade_tips[{k}]", 3)
+                         for k, p in enumerate(raw)])
+    if "blade_azimuths_deg" in td and "rotor_azimuth_deg" in td:
+        raise ConfigError(f"{w}: give blade_azimuths_deg or rotor_azimuth_deg, not both")
+    source = "default"
+    if td.get("blade_azimuths_deg") is not None:
+        az = td["blade_azimuths_deg"]
+        if not isinstance(az, list) or len(az) != blades:
+            raise ConfigError(f"{w}.blade_azimuths_deg: expected a list of {blades} angles in "
+                              f"[0, 360), got {az!r}")
+        azimuths = tuple(number({"a": a}, "a", f"{w}.blade_azimuths_deg[{k}]", 0, 360)
+                         for k, a in enumerate(az))
+        source = "yaml"
+    else:
+        a1 = number(td, "rotor_azimuth_deg", w, 0, 360, default=None)
+        if a1 is not None:
+            source = "yaml"
+        azimuths = tuple(((90.0 if a1 is None else a1) + k * 360.0 / blades) % 360.0
+                         for k in range(blades))
+    try:
+        turbine = Turbine(id=tid, base=base, hub_height=hub, rotor_diameter=diam, yaw_deg=yaw,
+                          azimuths_deg=azimuths, blade_pitch_deg=pitch, **kw)
+    except ValueError as e:
+        raise ConfigError(f"{w}: {e}") from None
+    if tips is not None:
+        from wtcli.plan.zone import azimuths_from_tips
+
+        try:
+            turbine = replace(turbine, azimuths_deg=tuple(azimuths_from_tips(turbine, tips)))
+        except ValueError as e:
+            raise ConfigError(f"{w}.blade_tips: {e}") from None
+        source = "tips"
+
+    pose = None
+    if td.get("camera_pose") is not None:
+        pw = f"{w}.camera_pose"
+        pm = need_mapping(td["camera_pose"], pw)
+        check_keys(pm, POSE_KEYS, pw, required=("position", "look_at"))
+        pose = CameraPose(tuple(vector(pm, "position", pw, 3)), tuple(vector(pm, "look_at", pw, 3)),
+                          number(pm, "roll_deg", pw, -180, 180, default=0.0))
+        if math.dist(pose.position, pose.look_at) < 1e-6:
+            raise ConfigError(f"{pw}: position and look_at coincide")
+    photo = None
+    if td.get("photo") is not None:
+        photo = Path(string(td, "photo", w))
+        if not photo.is_absolute():
+            photo = base_dir / photo
+    return turbine, TurbineExtras(photo, tips, pose, source)

@@ -1,0 +1,469 @@
+"""The planner: a Mission (turbines, camera, fleet, settings) -> a checked, timed Plan.
+
+``plan_mission`` builds each turbine's component trajectories (paths.py), orders the turbines to
+shorten the flight, splits them across the UAVs to balance flight time, inserts returns to the
+launch point for battery swaps, times every waypoint, predicts coverage with the one coverage
+measure, and checks clearance to every part of every real turbine and the ground. With
+``enforce_safety`` (the default for the adaptive pattern) any violation, unreachable station
+or side below ``min_side_coverage`` is a PlanError that says what blocks it.
+
+Patterns: ``adaptive`` follows the blades' real azimuths; ``fixed-y`` is the non-adaptive
+baseline that assumes the rotor stopped in a "Y" (blade 1 up at 90 deg, the others evenly
+spaced) whatever the real azimuths are. The plan still carries the REAL turbines, so the
+baseline's coverage and clearance are judged against reality (its violations are reported in
+the summary, not raised).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from wtcli.errors import ConfigError, PlanError
+from wtcli.geometry import Camera, Turbine
+from wtcli.geometry.coverage import measure_coverage
+from wtcli.plan.config import Mission
+from wtcli.plan.paths import (WP, Chunk, PassParams, _Blocked, blade_chunk, connect,
+                              nacelle_chunk, tower_chunk)
+from wtcli.plan.safety import Site
+from wtcli.plan.zone import initial_point, zone
+from wtcli.plan_file import Plan, Route
+
+PATTERNS = ("adaptive", "fixed-y")
+GSD_FILL = 0.9  # nominal standoff = this fraction of the distance that gives the target GSD
+SPLIT_BELOW = 0.985  # a single-pass flat side below this predicted coverage is flown split
+Z = np.array([0.0, 0.0, 1.0])
+
+
+def y_turbine(t: Turbine) -> Turbine:
+    """The turbine as the fixed pattern assumes it: blade 1 up (90 deg), the others evenly spaced."""
+    return replace(t, azimuths_deg=tuple((90.0 + k * 360.0 / t.n_blades) % 360.0
+                                         for k in range(t.n_blades)))
+
+
+def pass_params(mission: Mission) -> tuple[PassParams, float, float]:
+    """(pass parameters, GSD the coverage is judged at, nominal GSD at the standoff)."""
+    s, cam = mission.settings, mission.camera
+    req = s.required_clearance_m
+    st_gsd = GSD_FILL * cam.distance_for_gsd(s.target_gsd_mm)
+    st_min = 1.01 * req + 0.05  # the model's clearance is a slightly conservative lower bound
+    if st_gsd >= st_min:
+        st, gsd_eval = st_gsd, s.target_gsd_mm
+    elif s.allow_coarser_gsd:
+        st = st_min
+        gsd_eval = float(cam.gsd_mm(st / GSD_FILL))
+    else:
+        raise PlanError(
+            f"target_gsd_mm {s.target_gsd_mm:g} needs the camera within {st_gsd:.2f} m of the "
+            f"surface, closer than safe_distance_m + tracking_margin_m = {req:g} m; use a longer "
+            f"lens, a coarser target_gsd_mm (>= {float(cam.gsd_mm(st_min / GSD_FILL)):.2f}) or "
+            "allow_coarser_gsd: true")
+    pp = PassParams(cam, st, 0.97 * cam.distance_for_gsd(gsd_eval), req, s.overlap, s.min_altitude_m)
+    return pp, gsd_eval, float(cam.gsd_mm(st))
+
+
+def default_launch(t: Turbine) -> np.ndarray:
+    p = t.base_xyz + t.axis * max(60.0, t.tip_radius + 15.0)
+    return np.array([p[0], p[1], t.base_xyz[2]])
+
+
+# ---- per-turbine chunks ------------------------------------------------------------------------------
+def blade_order(t: Turbine) -> list[int]:
+    """Clockwise as seen from the front, starting with the blade nearest straight up."""
+    return sorted(range(t.n_blades), key=lambda k: (90.0 - t.azimuths_deg[k]) % 360.0)
+
+
+def turbine_chunks(t: Turbine, site: Site, pp: PassParams, mission: Mission,
+                   split: dict[int, set[str]] | None = None) -> list[Chunk]:
+    ex = mission.extra(t.id)
+    z = zone(t, ex.measured_tips)
+    sp = initial_point(t, z)
+    k = 0
+    while site.clearance(sp[None])[0] < pp.required and k < 50:  # push S_p out until it is clear
+        sp = sp + t.axis * 2.0
+        k += 1
+    chunks = [Chunk(t.id, "overview", [WP(sp, _unit(z.center - sp), True, f"{t.id}/overview")])]
+    try:
+        for k in blade_order(t):
+            chunks.append(blade_chunk(t, k, site, pp, f"{t.id}/blade{k + 1}",
+                                      (split or {}).get(k, set())))
+        if mission.settings.inspect_nacelle:
+            chunks.append(nacelle_chunk(t, site, pp))
+        if mission.settings.inspect_tower:
+            chunks.append(tower_chunk(t, site, pp, mission.settings.tower_columns,
+                                      start_near=chunks[-1].end))
+    except _Blocked as e:
+        raise PlanError(f"turbine {t.id}: {e} keeping {pp.required:g} m (safe distance + tracking "
+                        "margin); lower the margin or check the turbine sizes") from None
+    return [c for c in chunks if c.wps]
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+# ---- timing ------------------------------------------------------------------------------------------
+def _leg_time(p: np.ndarray, q: np.ndarray, v: float, climb: float) -> float:
+    d = float(np.linalg.norm(q - p))
+    return max(d / v, abs(float(q[2] - p[2])) / climb) if d > 0 else 0.0
+
+
+def chunk_time(ch: Chunk, v_slow: float, climb: float) -> float:
+    P = np.array([w.pos for w in ch.wps])
+    return sum(_leg_time(P[i], P[i + 1], v_slow, climb) for i in range(len(P) - 1))
+
+
+# ---- ordering and splitting --------------------------------------------------------------------------
+def visit_order(points: np.ndarray, start: np.ndarray) -> list[int]:
+    """A short open tour from ``start`` through all points: nearest neighbour, then 2-opt."""
+    n = len(points)
+    if n <= 2:
+        return sorted(range(n), key=lambda i: np.linalg.norm(points[i] - start))
+    left = set(range(n))
+    order, cur = [], start
+    while left:
+        i = min(left, key=lambda j: float(np.linalg.norm(points[j] - cur)))
+        order.append(i)
+        left.remove(i)
+        cur = points[i]
+    P = np.vstack([start[None], points[order]])
+    improved = True
+    while improved:
+        improved = False
+        for i in range(1, len(P) - 2):
+            a, b = P[i - 1], P[i]
+            c, d = P[i + 1:-1], P[i + 2:]
+            gain = (np.linalg.norm(a - b) + np.linalg.norm(c - d, axis=1)
+                    - np.linalg.norm(a - c, axis=1) - np.linalg.norm(b - d, axis=1))
+            if len(gain) and gain.max() > 1e-6:
+                j = i + 1 + int(np.argmax(gain))
+                P[i:j + 1] = P[i:j + 1][::-1].copy()
+                order[i - 1:j] = order[i - 1:j][::-1]
+                improved = True
+    return order
+
+
+def split_balanced(costs: list[float], parts: int) -> list[tuple[int, int]]:
+    """Split a sequence into at most ``parts`` contiguous runs minimising the largest run cost."""
+    n = len(costs)
+    parts = min(parts, n)
+    pre = np.concatenate([[0.0], np.cumsum(costs)])
+    INF = float("inf")
+    best = np.full((parts + 1, n + 1), INF)
+    cut = np.zeros((parts + 1, n + 1), int)
+    best[0, 0] = 0.0
+    for p in range(1, parts + 1):
+        for j in range(1, n + 1):
+            for i in range(p - 1, j):
+                v = max(best[p - 1, i], pre[j] - pre[i])
+                if v < best[p, j]:
+                    best[p, j], cut[p, j] = v, i
+    runs, j = [], n
+    for p in range(parts, 0, -1):
+        i = cut[p, j]
+        runs.append((i, j))
+        j = i
+    return [r for r in reversed(runs) if r[1] > r[0]]
+
+
+# ---- routes --------------------------------------------------------------------------------------------
+def _yaw_pitch(fwd: np.ndarray) -> tuple[float, float]:
+    f = _unit(fwd)
+    yaw = math.degrees(math.atan2(f[0], f[1])) % 360.0
+    pitch = math.degrees(math.asin(max(-1.0, min(1.0, float(f[2])))))
+    return yaw, pitch
+
+
+def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Mission, site: Site,
+                pp: PassParams) -> Route:
+    fl, s = mission.fleet, mission.settings
+    v_slow = min(fl.inspection_speed_m_s, fl.max_speed_m_s)
+    v_fast = min(fl.cruise_speed_m_s, fl.max_speed_m_s)
+    climb = fl.climb_rate_m_s
+    above = launch + Z * s.takeoff_altitude_m
+    usable = fl.usable_battery_s
+    first_fwd = _unit(np.r_[(chunks[0].start - launch)[:2], 0.0] + 1e-9)
+    wps: list[WP] = [WP(launch.copy(), first_fwd, False, "launch", False)]
+    swaps: list[int] = []  # indices of waypoints after which the battery is swapped
+
+    def link(p: np.ndarray, q: np.ndarray, comp: str, fast: bool, what: str) -> list[WP]:
+        gmin = float(site.ground_z(np.array([p, q])).min()) + s.min_altitude_m
+        if comp == "launch" or comp == "return":
+            gmin = None
+        vias = connect(site, p, q, pp.leg_required, ground=gmin)
+        if vias is None:
+            raise PlanError(f"{uav}: no safe straight or detoured path {what} keeping "
+                            f"{pp.leg_required:.2f} m from every turbine part")
+        return [WP(v, None, False, comp, not fast) for v in vias]
+
+    def takeoff() -> None:
+        wps.append(WP(above.copy(), None, False, "launch", False))
+
+    def go_home() -> None:
+        wps.extend(link(wps[-1].pos, above, "return", True, "back to the launch point"))
+        wps.append(WP(above.copy(), None, False, "return", False))
+        wps.append(WP(launch.copy(), None, False, "return", False))
+
+    takeoff()
+    sortie = _leg_time(launch, above, v_fast, climb)
+    for ch in chunks:
+        t_ch = chunk_time(ch, v_slow, climb)
+        t_to = _leg_time(wps[-1].pos, ch.start, v_fast, climb)
+        t_back = _leg_time(ch.end, above, v_fast, climb) + s.takeoff_altitude_m / climb
+        if sortie + t_to + t_ch + t_back > usable:
+            fresh = _leg_time(launch, above, v_fast, climb) + _leg_time(above, ch.start, v_fast, climb)
+            if fresh + t_ch + t_back > usable:
+                raise PlanError(
+                    f"{ch.turbine} {ch.name} takes {(fresh + t_ch + t_back) / 60:.1f} min from "
+                    f"take-off to landing, more than one battery allows "
+                    f"({fl.battery_minutes:g} - {fl.battery_reserve_minutes:g} reserve = "
+                    f"{usable / 60:.1f} min); raise battery_minutes or the speeds")
+            if len(wps) > 2:  # not already on a fresh battery at the launch point
+                go_home()
+                swaps.append(len(wps) - 1)
+                takeoff()
+                sortie = _leg_time(launch, above, v_fast, climb)
+            t_to = _leg_time(wps[-1].pos, ch.start, v_fast, climb)
+        prev = wps[-1].pos
+        wps.extend(link(prev, ch.start, "transit", True, f"to {ch.turbine} {ch.name}"))
+        wps.append(WP(ch.wps[0].pos, ch.wps[0].fwd, ch.wps[0].photo, ch.wps[0].component, False))
+        wps.extend(ch.wps[1:])
+        sortie += t_to + t_ch
+    go_home()
+    return _timed_route(uav, wps, swaps, v_slow, v_fast, climb, fl.battery_swap_s)
+
+
+def _timed_route(uav: str, wps: list[WP], swaps: list[int], v_slow: float, v_fast: float,
+                 climb: float, swap_s: float) -> Route:
+    n = len(wps)
+    pos = np.array([w.pos for w in wps])
+    t = np.zeros(n)
+    speed = np.zeros(n)
+    yaw = np.zeros(n)
+    pitch = np.zeros(n)
+    fwd = wps[0].fwd
+    swap_set = set(swaps)
+    for i, w in enumerate(wps):
+        if w.fwd is not None:
+            fwd = w.fwd
+        yaw[i], pitch[i] = _yaw_pitch(fwd)
+        if i == 0:
+            continue
+        v = v_slow if w.slow else v_fast
+        dt = _leg_time(pos[i - 1], pos[i], v, climb)
+        L = float(np.linalg.norm(pos[i] - pos[i - 1]))
+        t[i] = t[i - 1] + dt + (swap_s if (i - 1) in swap_set else 0.0)
+        speed[i] = L / dt if dt > 0 else 0.0
+    return Route(uav, t, pos, speed, yaw, pitch, np.array([w.photo for w in wps]),
+                 np.array([w.component for w in wps], dtype=object),
+                 summary={"battery_swaps": len(swaps), "sorties": len(swaps) + 1})
+
+
+# ---- checks ---------------------------------------------------------------------------------------------
+def check_routes(routes: list[Route], site: Site, launch: np.ndarray, safe: float,
+                 min_alt: float) -> dict:
+    """Clearance of every waypoint and leg to every real turbine part, and height above ground."""
+    out = {"min_clearance_m": float("inf"), "waypoint_violations": 0, "leg_violations": 0,
+           "ground_violations": 0, "first_violation": None}
+    for r in routes:
+        c = site.clearance(r.pos)
+        lb = site.segment_clearance(r.pos[:-1], r.pos[1:], 0.5)
+        out["min_clearance_m"] = min(out["min_clearance_m"], float(c.min()), float(lb.min()))
+        bad_w = np.nonzero(c < safe)[0]
+        bad_l = np.nonzero(lb < safe)[0]
+        at_launch = np.linalg.norm(r.pos[:, :2] - launch[:2], axis=1) < 0.5
+        low = (r.pos[:, 2] < site.ground_z(r.pos) + min_alt - 1e-6) & ~at_launch
+        bad_g = np.nonzero(low)[0]
+        out["waypoint_violations"] += len(bad_w)
+        out["leg_violations"] += len(bad_l)
+        out["ground_violations"] += len(bad_g)
+        if out["first_violation"] is None:
+            if len(bad_w):
+                i = int(bad_w[0])
+                part, d = site.nearest_part(r.pos[i])
+                out["first_violation"] = (f"{r.uav} waypoint {i} ({r.component[i]}) at "
+                                          f"{np.round(r.pos[i], 2).tolist()} is {d:.2f} m from {part}")
+            elif len(bad_l):
+                i = int(bad_l[0])
+                out["first_violation"] = (f"{r.uav} leg {i}->{i + 1} ({r.component[i + 1]}) passes "
+                                          f"{lb[i]:.2f} m from a turbine part")
+            elif len(bad_g):
+                i = int(bad_g[0])
+                out["first_violation"] = (f"{r.uav} waypoint {i} ({r.component[i]}) is below "
+                                          f"{min_alt:g} m above the ground")
+    return out
+
+
+def predict_coverage(t: Turbine, routes: list[Route], camera: Camera, gsd_mm: float,
+                     spacing: float, max_incidence: float):
+    pos, rot = [], []
+    prefix = f"{t.id}/"
+    for r in routes:
+        sel = np.nonzero(r.photo & np.array([str(c).startswith(prefix) for c in r.component]))[0]
+        for i in sel:
+            pos.append(r.pos[i])
+            rot.append(Camera.rotation_from_yaw_pitch(float(r.yaw_deg[i]), float(r.gimbal_pitch_deg[i])))
+    samples = t.surface_samples(spacing)
+    return measure_coverage(samples, camera, np.array(pos).reshape(-1, 3),
+                            np.array(rot).reshape(-1, 3, 3), gsd_mm, max_incidence)
+
+
+def _blade_coverage_from_chunks(t: Turbine, chunks: list[Chunk], camera: Camera, gsd_mm: float,
+                                spacing: float, max_incidence: float):
+    pos = np.array([w.pos for c in chunks for w in c.wps if w.photo]).reshape(-1, 3)
+    rot = np.array([Camera.rotation_from_yaw_pitch(*_yaw_pitch(w.fwd))
+                    for c in chunks for w in c.wps if w.photo]).reshape(-1, 3, 3)
+    return measure_coverage(t.surface_samples(spacing, "blades"), camera, pos, rot, gsd_mm,
+                            max_incidence)
+
+
+# ---- the planner -----------------------------------------------------------------------------------------
+def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = None,
+                 pattern: str = "adaptive", enforce_safety: bool | None = None) -> Plan:
+    """Plan every turbine of ``mission`` for its fleet; see the module docstring.
+
+    azimuths: turbine id -> blade rotor azimuths (deg), overriding the YAML.
+    enforce_safety: raise PlanError on any clearance/ground violation or coverage shortfall
+    (default: True for "adaptive", False for the "fixed-y" baseline, which reports them)."""
+    if pattern not in PATTERNS:
+        raise ConfigError(f"pattern: expected one of {', '.join(PATTERNS)}, got {pattern!r}")
+    if enforce_safety is None:
+        enforce_safety = pattern == "adaptive"
+    if azimuths:
+        unknown = set(azimuths) - {t.id for t in mission.turbines}
+        if unknown:
+            raise ConfigError(f"azimuths given for unknown turbine(s) {sorted(unknown)}")
+        try:
+            mission = mission.with_azimuths(azimuths)
+        except ValueError as e:
+            raise ConfigError(str(e)) from None
+    s, fl = mission.settings, mission.fleet
+    real = list(mission.turbines)
+    assumed = real if pattern == "adaptive" else [y_turbine(t) for t in real]
+    launch = np.array(fl.launch, float) if fl.launch is not None else default_launch(real[0])
+    site_plan = Site(assumed, launch=launch)
+    site_real = Site(real, launch=launch)
+    lc = float(site_real.clearance(launch[None])[0])
+    if lc < s.safe_distance_m:
+        part, d = site_real.nearest_part(launch)
+        raise PlanError(f"the launch point {np.round(launch, 2).tolist()} is {d:.2f} m from {part}, "
+                        f"closer than safe_distance_m {s.safe_distance_m:g}")
+    pp, gsd_eval, gsd_nominal = pass_params(mission)
+
+    # Component trajectories per turbine (adaptive: split flat sides that a single pass misses).
+    tours: dict[str, list[Chunk]] = {}
+    notes: list[str] = []
+    for t in assumed:
+        chunks = turbine_chunks(t, site_plan, pp, mission)
+        if pattern == "adaptive":
+            cov = _blade_coverage_from_chunks(t, chunks, mission.camera, gsd_eval,
+                                              s.coverage_spacing_m, s.max_incidence_deg)
+            split: dict[int, set[str]] = {}
+            for b, sides in cov.by_blade_side().items():
+                low = {side for side, v in sides.items() if v < SPLIT_BELOW}
+                if low:
+                    split[int(b[5:]) - 1] = low
+            if split:
+                chunks = turbine_chunks(t, site_plan, pp, mission, split)
+        tours[t.id] = chunks
+        notes += [n for c in chunks for n in c.notes]
+
+    # Visit order and split across UAVs (balanced by estimated flight time).
+    v_slow = min(fl.inspection_speed_m_s, fl.max_speed_m_s)
+    v_fast = min(fl.cruise_speed_m_s, fl.max_speed_m_s)
+    ids = [t.id for t in assumed]
+    starts = np.array([tours[i][0].start for i in ids])
+    order = [ids[j] for j in visit_order(starts, launch)]
+    cost = []
+    for i, tid in enumerate(order):
+        inner = sum(chunk_time(c, v_slow, fl.climb_rate_m_s) for c in tours[tid])
+        hops = sum(float(np.linalg.norm(a.end - b.start)) for a, b in zip(tours[tid], tours[tid][1:]))
+        cost.append(inner + hops / v_slow + 2 * float(np.linalg.norm(tours[tid][0].start - launch)) / v_fast
+                    / max(1, len(order)))
+    runs = split_balanced(cost, len(fl.uavs))
+    routes, assignment = [], {}
+    for u, (a, b) in zip(fl.uavs, runs):
+        chunks = [c for tid in order[a:b] for c in tours[tid]]
+        assignment[u] = order[a:b]
+        routes.append(build_route(u, chunks, launch, mission, site_plan, pp))
+
+    check = check_routes(routes, site_real, launch, s.safe_distance_m, s.min_altitude_m)
+    if enforce_safety and (check["waypoint_violations"] or check["leg_violations"]
+                           or check["ground_violations"]):
+        raise PlanError(f"unsafe plan refused: {check['first_violation']} (safe distance "
+                        f"{s.safe_distance_m:g} m)")
+
+    coverage = {}
+    for t in real:
+        cov = predict_coverage(t, routes, mission.camera, gsd_eval, s.coverage_spacing_m,
+                               s.max_incidence_deg)
+        sides = cov.by_blade_side()
+        vals = [v for d in sides.values() for v in d.values()]
+        coverage[t.id] = {"by_blade_side": sides, "blade_average": cov.blade_average(),
+                          "min_side": float(min(vals)) if vals else 0.0,
+                          "structure": cov.structure_fraction()}
+        if enforce_safety and vals and min(vals) < s.min_side_coverage:
+            worst = min(((b, side, v) for b, d in sides.items() for side, v in d.items()),
+                        key=lambda x: x[2])
+            raise PlanError(f"turbine {t.id} {worst[0]} {worst[1]}: predicted coverage "
+                            f"{worst[2]:.1%} < min_side_coverage {s.min_side_coverage:.0%} at "
+                            f"{gsd_eval:.2f} mm/px" + (f" ({notes[0]})" if notes else ""))
+
+    summary = _summary(routes, mission, pattern, check, coverage, assignment, gsd_eval,
+                       gsd_nominal, pp, notes, launch)
+    return Plan(real, Camera(mission.camera.width_px, mission.camera.height_px,
+                             mission.camera.focal_mm, mission.camera.sensor_width_mm),
+                routes, s.safe_distance_m, gsd_eval, mission.site_origin, summary)
+
+
+def _summary(routes: list[Route], mission: Mission, pattern: str, check: dict, coverage: dict,
+             assignment: dict, gsd_eval: float, gsd_nominal: float, pp: PassParams,
+             notes: list[str], launch: np.ndarray) -> dict:
+    per_comp: dict[str, dict] = {}
+    per_uav: dict[str, dict] = {}
+    for r in routes:
+        seg = np.r_[0.0, np.linalg.norm(np.diff(r.pos, axis=0), axis=1)]
+        dt = np.r_[0.0, np.diff(r.t)]
+        for i in range(len(r)):
+            c = per_comp.setdefault(str(r.component[i]), {"length_m": 0.0, "time_s": 0.0, "photos": 0})
+            c["length_m"] += float(seg[i])
+            c["time_s"] += float(dt[i])
+            c["photos"] += int(r.photo[i])
+        per_uav[r.uav] = {"length_m": r.length_m, "time_s": r.duration_s, "photos": int(r.photo.sum()),
+                          "turbines": assignment.get(r.uav, []), **r.summary}
+    for u in mission.fleet.uavs:
+        per_uav.setdefault(u, {"length_m": 0.0, "time_s": 0.0, "photos": 0, "turbines": [],
+                               "battery_swaps": 0, "sorties": 0})
+    zones = {}
+    for t in mission.turbines:
+        z = zone(t, mission.extra(t.id).measured_tips)
+        zones[t.id] = {"center": z.center.tolist(), "radius_m": z.radius,
+                       "initial_point": initial_point(t, z).tolist(),
+                       "azimuths_deg": list(t.azimuths_deg),
+                       "azimuth_source": mission.extra(t.id).azimuth_source}
+    s = mission.settings
+    return {
+        "pattern": pattern,
+        "total_length_m": float(sum(r.length_m for r in routes)),
+        "total_time_s": float(max(r.duration_s for r in routes)),
+        "flight_time_sum_s": float(sum(r.duration_s for r in routes)),
+        "photos": int(sum(int(r.photo.sum()) for r in routes)),
+        "min_clearance_m": check["min_clearance_m"],
+        "violations": {k: check[k] for k in ("waypoint_violations", "leg_violations",
+                                             "ground_violations")},
+        "first_violation": check["first_violation"],
+        "per_uav": per_uav,
+        "per_component": per_comp,
+        "predicted_coverage": coverage,
+        "requested_gsd_mm": s.target_gsd_mm,
+        "achieved_gsd_mm": gsd_nominal,
+        "coverage_gsd_mm": gsd_eval,
+        "standoff_m": pp.standoff,
+        "safe_distance_m": s.safe_distance_m,
+        "required_clearance_m": pp.required,
+        "launch": launch.tolist(),
+        "turbines": zones,
+        "notes": notes,
+    }

@@ -1,0 +1,394 @@
+"""Step 1.5 (eq. 8-9): the trajectories around one turbine's components.
+
+Blades (adaptive, eq. 8): for each blade, passes along its real direction d, one per side
+(leading edge +c, pressure side +n, trailing edge -c, suction side -n in ``Turbine.blade_frame``),
+each at the camera-to-surface standoff that gives the target GSD: the camera sits at the local
+section's support distance in the viewing direction plus the standoff, and looks back at the blade
+axis. Passes alternate root->tip and tip->root, joined by arcs around the blade axis (around the tip
+at the outer end); the flight then returns to the blade's start point S_p,i (eq. 8's return leg).
+
+Where the geometry blocks a pass (a blade pointing down past the tower leaves no room behind it
+for the trailing edge; the hub and nacelle crowd the roots), the blocked stations are flown as two
+oblique passes at +-alpha around the side's normal (alpha <= 55 deg, so together they still see
+every part of that side within 60 deg of incidence), at the smallest alpha that clears.
+
+Tower and nacelle (fixed, the paper's "determined in advance"): vertical photo columns around the
+tower, flown up and down in turn; a loop along both sides, the rear and the top of the nacelle.
+Stations that would come closer than the required clearance to any part are dropped.
+
+Every waypoint keeps ``required`` clearance (safe distance + tracking margin) from every part of
+every turbine; every leg ``required - step/2`` (the lower bound's sampling slack).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from wtcli.geometry import BLADE_SIDES, Camera, Turbine
+from wtcli.plan.safety import Site
+
+Z = np.array([0.0, 0.0, 1.0])
+ALPHAS_DEG = (15.0, 25.0, 35.0, 45.0, 55.0, 65.0, 75.0)
+LEG_STEP = 0.5
+
+
+@dataclass
+class WP:
+    pos: np.ndarray
+    fwd: np.ndarray | None  # camera viewing direction (unit), None = keep the previous aim
+    photo: bool
+    component: str
+    slow: bool = True  # inspection speed (True) or cruise speed (False) on the leg ending here
+
+
+@dataclass(frozen=True)
+class PassParams:
+    camera: Camera
+    standoff: float  # camera-to-surface distance, m
+    max_standoff: float  # farthest camera-to-surface distance still within the target GSD
+    required: float  # clearance every waypoint keeps, m
+    overlap: float
+    min_altitude: float
+
+    @property
+    def leg_required(self) -> float:
+        return self.required - 0.5 * LEG_STEP
+
+    def spacing(self, distance: float) -> float:
+        """Photo spacing: (1 - overlap) of the footprint's shorter side at ``distance``."""
+        fw, fh = self.camera.footprint_m(distance)
+        return max(0.25, (1.0 - self.overlap) * min(fw, fh))
+
+
+@dataclass
+class Chunk:
+    """One component's waypoints (a blade, the nacelle, the tower, the overview photo)."""
+
+    turbine: str
+    name: str  # blade1 | nacelle | tower | overview
+    wps: list[WP] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def start(self) -> np.ndarray:
+        return self.wps[0].pos
+
+    @property
+    def end(self) -> np.ndarray:
+        return self.wps[-1].pos
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+# ---- connecting two points safely ----------------------------------------------------------------
+def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
+            hints: list[np.ndarray] | None = None, ground: float | None = None) -> list[np.ndarray] | None:
+    """Via points (possibly none) so that p -> vias -> q keeps ``leg_required`` from everything.
+
+    Tries the straight leg, then one via point pushed from the midpoint, then two via points
+    pushed from p and q, along the hint directions by growing distances. None if nothing works.
+    """
+    p, q = np.asarray(p, float), np.asarray(q, float)
+
+    def ok(points: list[np.ndarray]) -> bool:
+        P = np.array(points)
+        if ground is not None and (P[1:-1, 2] < ground).any():
+            return False
+        return bool((site.segment_clearance(P[:-1], P[1:], LEG_STEP) >= leg_required).all())
+
+    if ok([p, q]):
+        return []
+    dirs = list(hints or [])
+    m = 0.5 * (p + q)
+    for t in site.turbines:
+        if np.linalg.norm(m - t.hub_center) < t.tip_radius + 60:
+            radial = m - t.hub_center
+            radial -= (radial @ t.axis) * t.axis
+            if np.linalg.norm(radial) > 1e-6:
+                dirs.append(_unit(radial))
+            dirs += [t.axis, -t.axis, Z]
+            break
+    dirs.append(Z)
+    for dist in (2.0, 4.0, 7.0, 11.0, 16.0, 24.0, 35.0, 50.0):
+        for u in dirs:
+            v = m + dist * u
+            if ok([p, v, q]):
+                return [v]
+        for u in dirs:
+            a, b = p + dist * u, q + dist * u
+            if ok([p, a, b, q]):
+                return [a, b]
+    return None
+
+
+# ---- blades ------------------------------------------------------------------------------------------
+SIDE_DIRS = {"leading_edge": (1, 0), "pressure_side": (0, 1), "trailing_edge": (-1, 0),
+             "suction_side": (0, -1)}
+
+
+def _support(turbine: Turbine, f: np.ndarray, wc: np.ndarray, wn: np.ndarray) -> np.ndarray:
+    """Support distance of the blade section at span fraction f in direction (wc, wn) of (c, n)."""
+    A, B = turbine.blade_semi_axes(f)
+    return np.sqrt((A * wc) ** 2 + (B * wn) ** 2)
+
+
+def blade_stations(turbine: Turbine, spacing: float) -> np.ndarray:
+    """Span distances (m from the hub centre) of the photo stations, root to tip."""
+    s0 = max(turbine.blade_root_offset,
+             math.sqrt(max(turbine.hub_radius ** 2 - (turbine.blade_root_chord / 2) ** 2, 0.0)))
+    s1 = turbine.tip_radius
+    n = max(2, int(math.ceil((s1 - s0) / spacing)) + 1)
+    return np.linspace(s0 + 0.25 * spacing, s1, n)
+
+
+def _side_points(turbine: Turbine, k: int, s: np.ndarray, gamma: np.ndarray,
+                 offset: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Camera positions and viewing directions at spans s and angles gamma (rad, in the c-n plane
+    from +c towards +n), ``offset`` m beyond the section's support distance."""
+    d, c, n = turbine.blade_frame(k)
+    wc, wn = np.cos(gamma), np.sin(gamma)
+    s0, s1 = turbine.blade_root_offset, turbine.tip_radius
+    f = (np.clip(s, s0, s1) - s0) / (s1 - s0)
+    h = _support(turbine, f, wc, wn)
+    w = wc[:, None] * c + wn[:, None] * n
+    pos = turbine.hub_center + s[:, None] * d + (h + offset)[:, None] * w
+    return pos, -w
+
+
+def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str,
+                split_sides: frozenset[str] | set[str] = frozenset()) -> Chunk:
+    """All four sides of blade k (index), as passes joined by arcs, ending at its start point.
+
+    ``split_sides``: sides flown as two oblique passes everywhere (a wide chord's flat sides,
+    whose edges a single head-on pass sees beyond the incidence limit)."""
+    chunk = Chunk(turbine.id, f"blade{k + 1}")
+    d, c, n = turbine.blade_frame(k)
+    spacing = pp.spacing(pp.standoff)
+    S = blade_stations(turbine, spacing)
+    passes: list[tuple[str, np.ndarray, np.ndarray]] = []  # (side, positions, fwd) root -> tip
+    extra = [0.0] + [e for e in (0.5, 1.0, 1.5) if pp.standoff + e <= pp.max_standoff]
+    for side in BLADE_SIDES:
+        sc, sn = SIDE_DIRS[side]
+        g0 = math.atan2(sn, sc)
+        pos0, fwd0 = _side_points(turbine, k, S, np.full(len(S), g0), np.full(len(S), pp.standoff))
+        clear0 = site.clearance(pos0)
+        ground = site.ground_z(pos0) + pp.min_altitude
+        blocked = (clear0 < pp.required) | (pos0[:, 2] < ground)
+        forced = side in split_sides
+        if forced:
+            blocked[:] = True
+        if not blocked.any():
+            passes.append((side, pos0, fwd0))
+            continue
+        if not forced:
+            chunk.notes.append(f"{label}/{side}: {int(blocked.sum())} of {len(S)} stations blocked "
+                               "head-on; flown as two oblique passes")
+        for sign in (1.0, -1.0):
+            pos, fwd = pos0.copy(), fwd0.copy()
+            keep = ~blocked if sign > 0 else np.zeros(len(S), bool)
+            for j in np.nonzero(blocked)[0]:
+                found = False
+                for a in (ALPHAS_DEG[1:] if forced else ALPHAS_DEG):
+                    for e in extra:
+                        pj, fj = _side_points(turbine, k, S[j:j + 1], np.array([g0 + sign * math.radians(a)]),
+                                              np.array([pp.standoff + e]))
+                        if site.clearance(pj)[0] >= pp.required and \
+                                pj[0, 2] >= site.ground_z(pj)[0] + pp.min_altitude:
+                            pos[j], fwd[j], found = pj[0], fj[0], True
+                            break
+                    if found:
+                        break
+                keep[j] = found
+            if keep.any():
+                passes.append((side, pos[keep], fwd[keep]))
+            if (blocked & ~keep).any() and sign > 0:
+                chunk.notes.append(f"{label}/{side}: {int((blocked & ~keep).sum())} station(s) "
+                                   "unreachable at a safe distance: dropped")
+
+    # Alternate out and back; join passes with arcs around the blade axis.
+    for i, (side, pos, fwd) in enumerate(passes):
+        if i % 2 == 1:
+            pos, fwd = pos[::-1], fwd[::-1]
+        comp = f"{label}/{side}"
+        if chunk.wps:
+            _join(chunk.wps, pos[0], fwd[0], turbine, k, site, pp, comp)
+        append_chain(chunk, site, pp, [WP(p, f, True, comp) for p, f in zip(pos, fwd)])
+    wps = chunk.wps
+    if not wps:
+        chunk.notes.append(f"{label}: no safe station at all")
+        return chunk
+    # Eq. 8's return leg: back to the blade's start point S_p,i.
+    start = wps[0]
+    _join(wps, start.pos, start.fwd, turbine, k, site, pp, f"{label}/return")
+    wps.append(WP(start.pos.copy(), start.fwd, False, f"{label}/return"))
+    return chunk
+
+
+def _arc(turbine: Turbine, k: int, s: float, g_from: float, g_to: float, radius: float) -> list[np.ndarray]:
+    d, c, n = turbine.blade_frame(k)
+    dg = (g_to - g_from + math.pi) % (2 * math.pi) - math.pi
+    m = max(1, int(math.ceil(abs(dg) / math.radians(30))))
+    out = []
+    for j in range(1, m):
+        g = g_from + dg * j / m
+        out.append(turbine.hub_center + s * d + radius * (math.cos(g) * c + math.sin(g) * n))
+    return out
+
+
+def _join(wps: list[WP], q: np.ndarray, q_fwd: np.ndarray, turbine: Turbine, k: int, site: Site,
+          pp: PassParams, comp: str) -> None:
+    """Append non-photo via points from wps[-1] to q: an arc around the blade axis at the span of
+    the nearer end, moved outwards along the blade until it clears; else ``connect``."""
+    p = wps[-1].pos
+    d, c, n = turbine.blade_frame(k)
+    hc = turbine.hub_center
+
+    def polar(x: np.ndarray) -> tuple[float, float, float]:
+        r = x - hc
+        s = float(r @ d)
+        return s, math.atan2(float(r @ n), float(r @ c)), float(np.linalg.norm(r - s * d))
+
+    sp, gp, rp = polar(p)
+    sq, gq, rq = polar(q)
+    A, _ = turbine.blade_semi_axes(np.array([1.0]))
+    s_end = turbine.tip_radius
+    s_arc = max(sp, sq) if abs(sp - sq) < 3 else None
+    if s_arc is not None:
+        radius = max(rp, rq)
+        spans = [s_arc] + [x for x in np.arange(s_arc + 2.0, s_end + 0.1, 2.0)]
+        if s_arc > s_end - 2.0:  # at the tip: go round beyond it too
+            spans += [s_end + pp.required + 1.0]
+        for s in spans:
+            vias = []
+            if abs(s - sp) > 1e-6:
+                vias.append(hc + s * d + (p - hc - sp * d))
+            vias += _arc(turbine, k, s, gp, gq, radius if s <= s_end else rp)
+            if abs(s - sq) > 1e-6:
+                vias.append(hc + s * d + (q - hc - sq * d))
+            chain = np.array([p] + vias + [q])
+            ground = site.ground_z(chain[1:-1]) + pp.min_altitude if len(vias) else None
+            if ground is not None and (chain[1:-1, 2] < ground).any():
+                continue
+            if (site.clearance(chain[1:-1]) >= pp.required).all() and \
+                    (site.segment_clearance(chain[:-1], chain[1:], LEG_STEP) >= pp.leg_required).all():
+                wps += [WP(v, None, False, comp) for v in vias]
+                return
+    gmin = float(site.ground_z(np.array([p, q])).min()) + pp.min_altitude
+    vias = connect(site, p, q, pp.leg_required, hints=[_unit(p - hc - sp * d)], ground=gmin)
+    if vias is None:
+        raise _Blocked(f"no safe way from {np.round(p, 1).tolist()} to {np.round(q, 1).tolist()} "
+                       f"around {turbine.id} blade{k + 1}")
+    wps += [WP(v, None, False, comp) for v in vias]
+
+
+class _Blocked(Exception):
+    """Raised inside the planner; mission.py turns it into a PlanError naming the component."""
+
+
+# ---- nacelle and tower (fixed) ------------------------------------------------------------------------
+def _filter_stations(site: Site, pp: PassParams, pos: np.ndarray) -> np.ndarray:
+    ok = site.clearance(pos) >= pp.required
+    ok &= pos[:, 2] >= site.ground_z(pos) + pp.min_altitude
+    return ok
+
+
+def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams) -> Chunk:
+    chunk = Chunk(turbine.id, "nacelle")
+    a = turbine.axis
+    side = np.cross(Z, a)
+    half = np.array([turbine.nacelle_length, turbine.nacelle_width, turbine.nacelle_height]) / 2
+    ctr = turbine.nacelle_center
+    spacing = pp.spacing(pp.standoff)
+    m = max(2, int(math.ceil(2 * half[0] / spacing)) + 1)
+    along = np.linspace(half[0], -half[0], m)  # front -> rear
+    passes = []
+    for sgn in (1.0, -1.0):  # left side (front -> rear), right side (rear -> front)
+        off = sgn * side * (half[1] + pp.standoff)
+        pos = ctr + along[:, None] * a + off
+        fwd = np.tile(-sgn * side, (m, 1))
+        passes.append((f"{turbine.id}/nacelle", pos, fwd))
+        if sgn > 0:  # rear face between the two sides
+            passes.append((f"{turbine.id}/nacelle", (ctr - a * (half[0] + pp.standoff))[None], a[None]))
+    top = ctr + Z * (half[2] + pp.standoff) + along[::-1][:, None] * a  # rear -> front ... then back
+    passes.append((f"{turbine.id}/nacelle", top[::-1], np.tile(-Z, (m, 1))))
+    for i, (comp, pos, fwd) in enumerate(passes):
+        if i == 2:
+            pos, fwd = pos[::-1], fwd[::-1]  # right side rear -> front
+        keep = _filter_stations(site, pp, pos)
+        if (~keep).any():
+            chunk.notes.append(f"{comp}: {int((~keep).sum())} station(s) too close to a part: dropped")
+        append_chain(chunk, site, pp, [WP(p, f, True, comp) for p, f in zip(pos[keep], fwd[keep])])
+    return chunk
+
+
+def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
+                start_near: np.ndarray | None = None) -> Chunk:
+    chunk = Chunk(turbine.id, "tower")
+    rb, rt, H = turbine.tower_base_radius, turbine.tower_top_radius, turbine.tower_height
+    fw, fh = pp.camera.footprint_m(pp.standoff)
+    if columns <= 0:
+        columns = max(5, int(math.ceil(2 * math.pi * rb / (0.5 * fw))))
+    spacing = max(0.25, (1 - pp.overlap) * fh)
+    z_lo = pp.min_altitude + 0.5
+    z_hi = H - 0.5 * spacing
+    nz = max(2, int(math.ceil((z_hi - z_lo) / spacing)) + 1)
+    zs = np.linspace(z_hi, z_lo, nz)  # top -> bottom
+    yaw0 = math.atan2(turbine.axis[1], turbine.axis[0])
+    if start_near is not None:  # begin with the column nearest the previous point
+        v = np.asarray(start_near) - turbine.base_xyz
+        yaw0 = math.atan2(v[1], v[0])
+    comp = f"{turbine.id}/tower"
+    for j in range(columns):
+        ang = yaw0 + 2 * math.pi * j / columns
+        u = np.array([math.cos(ang), math.sin(ang), 0.0])
+        r = rb + (rt - rb) * zs / H
+        pos = turbine.base_xyz + (r + pp.standoff)[:, None] * u + zs[:, None] * Z
+        fwd = np.tile(-u, (nz, 1))
+        if j % 2 == 1:
+            pos, fwd = pos[::-1], fwd[::-1]
+        keep = _filter_stations(site, pp, pos)
+        if (~keep).any():
+            chunk.notes.append(f"{comp}: column {j + 1}: {int((~keep).sum())} station(s) too close "
+                               "to a part: dropped")
+        new: list[WP] = []
+        if chunk.wps and keep.any():  # arc around the tower at constant height to the next column
+            prev = chunk.wps[-1].pos
+            a0 = math.atan2(prev[1] - turbine.base_xyz[1], prev[0] - turbine.base_xyz[0])
+            da = (ang - a0 + math.pi) % (2 * math.pi) - math.pi
+            steps = max(1, int(math.ceil(abs(da) / math.radians(20))))
+            rr = float(np.hypot(*(prev[:2] - turbine.base_xyz[:2])))
+            arc = np.array([turbine.base_xyz + np.array([rr * math.cos(a0 + da * s / steps),
+                                                         rr * math.sin(a0 + da * s / steps),
+                                                         prev[2] - turbine.base_xyz[2]])
+                            for s in range(1, steps)]).reshape(-1, 3)
+            if len(arc):
+                arc = arc[site.clearance(arc) >= pp.required]
+            new += [WP(v, None, False, comp) for v in arc]
+        new += [WP(p, f, True, comp) for p, f in zip(pos[keep], fwd[keep])]
+        append_chain(chunk, site, pp, new)
+    return chunk
+
+
+def append_chain(chunk: Chunk, site: Site, pp: PassParams, new: list[WP]) -> None:
+    """Append waypoints in order; legs that do not keep the clearance get via points."""
+    if not new:
+        return
+    pts = np.array(([chunk.wps[-1].pos] if chunk.wps else []) + [w.pos for w in new])
+    bad = np.zeros(len(new), bool)
+    if len(pts) > 1:
+        lb = site.segment_clearance(pts[:-1], pts[1:], LEG_STEP)
+        bad[len(new) - len(lb):] = lb < pp.leg_required
+    for w, b in zip(new, bad):
+        if b:
+            p = chunk.wps[-1].pos
+            gmin = float(site.ground_z(np.array([p, w.pos])).min()) + pp.min_altitude
+            vias = connect(site, p, w.pos, pp.leg_required, ground=gmin)
+            if vias is None:
+                raise _Blocked(f"no safe way between two {w.component} stations")
+            chunk.wps += [WP(v, None, False, w.component) for v in vias]
+        chunk.wps.append(w)

@@ -1,0 +1,83 @@
+"""Clearance of points and straight legs to every part of every turbine of a site, and the ground.
+
+The distances are the one turbine model's (``Turbine.clearance``, a lower bound of the true
+distance). A turbine far from a point is skipped: its bounding box, grown by ``horizon_m``,
+does not contain the point, so its clearance is at least ``horizon_m`` and the reported value
+is capped there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wtcli.geometry import Turbine
+
+HORIZON_M = 60.0
+
+
+class Site:
+    def __init__(self, turbines: list[Turbine] | tuple[Turbine, ...], horizon_m: float = HORIZON_M,
+                 launch: np.ndarray | None = None):
+        self.turbines = list(turbines)
+        self.horizon = float(horizon_m)
+        lo, hi = [], []
+        for t in self.turbines:
+            reach = t.tip_radius + t.overhang + t.nacelle_length + t.hub_radius
+            b = t.base_xyz
+            lo.append([b[0] - reach, b[1] - reach, b[2]])
+            hi.append([b[0] + reach, b[1] + reach, b[2] + t.hub_height + reach])
+        self.lo = np.array(lo) - self.horizon
+        self.hi = np.array(hi) + self.horizon
+        ground = [t.base_xyz for t in self.turbines]
+        if launch is not None:
+            ground.append(np.asarray(launch, float))
+        self.ground_points = np.array(ground)
+
+    def near(self, points: np.ndarray) -> list[np.ndarray]:
+        """Per turbine, the indices of the points inside its grown bounding box."""
+        P = np.atleast_2d(points)
+        return [np.nonzero(((P >= lo) & (P <= hi)).all(axis=1))[0] for lo, hi in zip(self.lo, self.hi)]
+
+    def clearance(self, points: np.ndarray) -> np.ndarray:
+        """(M,) distance to the nearest part of any turbine, capped at the horizon."""
+        P = np.atleast_2d(np.asarray(points, float))
+        out = np.full(len(P), self.horizon)
+        for t, idx in zip(self.turbines, self.near(P)):
+            if len(idx):
+                out[idx] = np.minimum(out[idx], t.clearance(P[idx]))
+        return out
+
+    def nearest_part(self, point: np.ndarray) -> tuple[str, float]:
+        """("T1 blade2", 2.3): the part of any turbine nearest a point, and its distance."""
+        best = ("nothing", np.inf)
+        for t in self.turbines:
+            c = t.clearance_by_part(np.atleast_2d(point))[0]
+            k = int(np.argmin(c))
+            if c[k] < best[1]:
+                best = (f"{t.id} {t.part_names()[k]}", float(c[k]))
+        return best
+
+    def segment_clearance(self, p0: np.ndarray, p1: np.ndarray, step: float = 0.5) -> np.ndarray:
+        """Lower bound of the clearance along each straight leg p0[i] -> p1[i] (capped)."""
+        p0 = np.atleast_2d(np.asarray(p0, float))
+        p1 = np.atleast_2d(np.asarray(p1, float))
+        if len(p0) == 0:
+            return np.zeros(0)
+        length = np.linalg.norm(p1 - p0, axis=1)
+        n = np.maximum(1, np.ceil(length / step).astype(int))
+        seg = np.repeat(np.arange(len(p0)), n + 1)
+        start = np.concatenate([[0], np.cumsum(n + 1)[:-1]])
+        k = np.arange(len(seg)) - np.repeat(start, n + 1)
+        t = k / np.repeat(n, n + 1)
+        pts = p0[seg] + (p1 - p0)[seg] * t[:, None]
+        c = self.clearance(pts)
+        out = np.full(len(p0), np.inf)
+        np.minimum.at(out, seg, c)
+        return out - 0.5 * length / n
+
+    def ground_z(self, points: np.ndarray) -> np.ndarray:
+        """Ground level under each point: the height of the nearest turbine base or launch point
+        (a flat site around each of them)."""
+        P = np.atleast_2d(points)
+        d = np.linalg.norm(P[:, None, :2] - self.ground_points[None, :, :2], axis=2)
+        return self.ground_points[np.argmin(d, axis=1), 2]
