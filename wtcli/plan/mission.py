@@ -76,12 +76,27 @@ def blade_order(t: Turbine) -> list[int]:
 
 
 def turbine_chunks(t: Turbine, site: Site, pp: PassParams, mission: Mission,
-                   split: dict[int, set[str]] | None = None) -> list[Chunk]:
+                   split: dict[int, set[str]] | None = None,
+                   previous: list[Chunk] | None = None) -> list[Chunk]:
+    """Overview photo, blades, nacelle, tower. With ``previous`` (an earlier result for the same
+    turbine), only the blades named in ``split`` are rebuilt."""
+    if previous is not None:
+        out = []
+        try:
+            for c in previous:
+                if c.name.startswith("blade") and int(c.name[5:]) - 1 in (split or {}):
+                    k = int(c.name[5:]) - 1
+                    c = blade_chunk(t, k, site, pp, f"{t.id}/blade{k + 1}", split[k])
+                out.append(c)
+        except _Blocked as e:
+            raise PlanError(f"turbine {t.id}: {e} keeping {pp.required:g} m (safe distance + "
+                            "tracking margin); lower the margin or check the turbine sizes") from None
+        return [c for c in out if c.wps]
     ex = mission.extra(t.id)
     z = zone(t, ex.measured_tips)
     sp = initial_point(t, z)
     k = 0
-    while site.clearance(sp[None])[0] < pp.required and k < 50:  # push S_p out until it is clear
+    while site.clearance(sp[None], pp.required + 1)[0] < pp.required and k < 50:  # push S_p out until it is clear
         sp = sp + t.axis * 2.0
         k += 1
     chunks = [Chunk(t.id, "overview", [WP(sp, _unit(z.center - sp), True, f"{t.id}/overview")])]
@@ -268,8 +283,8 @@ def check_routes(routes: list[Route], site: Site, launch: np.ndarray, safe: floa
     out = {"min_clearance_m": float("inf"), "waypoint_violations": 0, "leg_violations": 0,
            "ground_violations": 0, "first_violation": None}
     for r in routes:
-        c = site.clearance(r.pos)
-        lb = site.segment_clearance(r.pos[:-1], r.pos[1:], 0.5)
+        c = site.clearance(r.pos, safe + 5.0)
+        lb = site.segment_clearance(r.pos[:-1], r.pos[1:], 0.5, safe + 5.0)
         out["min_clearance_m"] = min(out["min_clearance_m"], float(c.min()), float(lb.min()))
         bad_w = np.nonzero(c < safe)[0]
         bad_l = np.nonzero(lb < safe)[0]
@@ -366,7 +381,7 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
                 if low:
                     split[int(b[5:]) - 1] = low
             if split:
-                chunks = turbine_chunks(t, site_plan, pp, mission, split)
+                chunks = turbine_chunks(t, site_plan, pp, mission, split, previous=chunks)
         tours[t.id] = chunks
         notes += [n for c in chunks for n in c.notes]
 

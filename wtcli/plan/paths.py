@@ -91,17 +91,12 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
     """Via points (possibly none) so that p -> vias -> q keeps ``leg_required`` from everything.
 
     Tries the straight leg, then one via point pushed from the midpoint, then two via points
-    pushed from p and q, along the hint directions by growing distances. None if nothing works.
+    pushed from p and q, along the hint directions by growing distances (all candidates checked
+    in one vectorised call; the first, i.e. shortest push, that clears wins). None if none does.
     """
     p, q = np.asarray(p, float), np.asarray(q, float)
-
-    def ok(points: list[np.ndarray]) -> bool:
-        P = np.array(points)
-        if ground is not None and (P[1:-1, 2] < ground).any():
-            return False
-        return bool((site.segment_clearance(P[:-1], P[1:], LEG_STEP) >= leg_required).all())
-
-    if ok([p, q]):
+    cap = leg_required + 1.0
+    if site.segment_clearance(p[None], q[None], LEG_STEP, cap)[0] >= leg_required:
         return []
     dirs = list(hints or [])
     m = 0.5 * (p + q)
@@ -111,18 +106,28 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
             radial -= (radial @ t.axis) * t.axis
             if np.linalg.norm(radial) > 1e-6:
                 dirs.append(_unit(radial))
-            dirs += [t.axis, -t.axis, Z]
+            dirs += [t.axis, -t.axis, _unit(t.right + 0.0), -t.right]
             break
     dirs.append(Z)
+    cands: list[list[np.ndarray]] = []
     for dist in (2.0, 4.0, 7.0, 11.0, 16.0, 24.0, 35.0, 50.0):
-        for u in dirs:
-            v = m + dist * u
-            if ok([p, v, q]):
-                return [v]
-        for u in dirs:
-            a, b = p + dist * u, q + dist * u
-            if ok([p, a, b, q]):
-                return [a, b]
+        cands += [[m + dist * u] for u in dirs]
+        cands += [[p + dist * u, q + dist * u] for u in dirs]
+    legs0, legs1, owner = [], [], []
+    for i, vias in enumerate(cands):
+        chain = [p] + vias + [q]
+        for a, b in zip(chain[:-1], chain[1:]):
+            legs0.append(a)
+            legs1.append(b)
+            owner.append(i)
+    lb = site.segment_clearance(np.array(legs0), np.array(legs1), LEG_STEP, cap)
+    good = np.ones(len(cands), bool)
+    np.logical_and.at(good, np.array(owner), lb >= leg_required)
+    for i in np.nonzero(good)[0]:
+        vias = cands[i]
+        if ground is not None and any(v[2] < ground for v in vias):
+            continue
+        return vias
     return None
 
 
@@ -176,7 +181,7 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
         sc, sn = SIDE_DIRS[side]
         g0 = math.atan2(sn, sc)
         pos0, fwd0 = _side_points(turbine, k, S, np.full(len(S), g0), np.full(len(S), pp.standoff))
-        clear0 = site.clearance(pos0)
+        clear0 = site.clearance(pos0, pp.required + 1.0)
         ground = site.ground_z(pos0) + pp.min_altitude
         blocked = (clear0 < pp.required) | (pos0[:, 2] < ground)
         forced = side in split_sides
@@ -188,27 +193,32 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
         if not forced:
             chunk.notes.append(f"{label}/{side}: {int(blocked.sum())} of {len(S)} stations blocked "
                                "head-on; flown as two oblique passes")
+        alphas = np.radians(ALPHAS_DEG[1:] if forced else ALPHAS_DEG)
+        jj = np.nonzero(blocked)[0]
         for sign in (1.0, -1.0):
             pos, fwd = pos0.copy(), fwd0.copy()
             keep = ~blocked if sign > 0 else np.zeros(len(S), bool)
-            for j in np.nonzero(blocked)[0]:
-                found = False
-                for a in (ALPHAS_DEG[1:] if forced else ALPHAS_DEG):
-                    for e in extra:
-                        pj, fj = _side_points(turbine, k, S[j:j + 1], np.array([g0 + sign * math.radians(a)]),
-                                              np.array([pp.standoff + e]))
-                        if site.clearance(pj)[0] >= pp.required and \
-                                pj[0, 2] >= site.ground_z(pj)[0] + pp.min_altitude:
-                            pos[j], fwd[j], found = pj[0], fj[0], True
-                            break
-                    if found:
-                        break
-                keep[j] = found
+            # Every candidate (station, alpha, extra standoff) at once, in preference order.
+            J, AL, EX = np.meshgrid(jj, alphas, np.array(extra), indexing="ij")
+            J, AL, EX = J.ravel(), AL.ravel(), EX.ravel()
+            cp, cf = _side_points(turbine, k, S[J], g0 + sign * AL, pp.standoff + EX)
+            ok = (site.clearance(cp, pp.required + 1.0) >= pp.required) & \
+                (cp[:, 2] >= site.ground_z(cp) + pp.min_altitude)
+            per = len(alphas) * len(extra)
+            okm = ok.reshape(len(jj), per)
+            first = np.argmax(okm, axis=1)
+            found = okm.any(axis=1)
+            for n_j, j in enumerate(jj):
+                if found[n_j]:
+                    c = n_j * per + first[n_j]
+                    pos[j], fwd[j] = cp[c], cf[c]
+            keep[jj] = found
             if keep.any():
                 passes.append((side, pos[keep], fwd[keep]))
-            if (blocked & ~keep).any() and sign > 0:
-                chunk.notes.append(f"{label}/{side}: {int((blocked & ~keep).sum())} station(s) "
-                                   "unreachable at a safe distance: dropped")
+            if (~found).any():
+                chunk.notes.append(f"{label}/{side}: {int((~found).sum())} station(s) unreachable "
+                                   f"from the {'+' if sign > 0 else '-'} side at a safe distance: "
+                                   "dropped")
 
     # Alternate out and back; join passes with arcs around the blade axis.
     for i, (side, pos, fwd) in enumerate(passes):
@@ -229,9 +239,12 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
     return chunk
 
 
-def _arc(turbine: Turbine, k: int, s: float, g_from: float, g_to: float, radius: float) -> list[np.ndarray]:
+def _arc(turbine: Turbine, k: int, s: float, g_from: float, g_to: float, radius: float,
+         long_way: bool = False) -> list[np.ndarray]:
     d, c, n = turbine.blade_frame(k)
     dg = (g_to - g_from + math.pi) % (2 * math.pi) - math.pi
+    if long_way:
+        dg -= math.copysign(2 * math.pi, dg)
     m = max(1, int(math.ceil(abs(dg) / math.radians(30))))
     out = []
     for j in range(1, m):
@@ -263,21 +276,36 @@ def _join(wps: list[WP], q: np.ndarray, q_fwd: np.ndarray, turbine: Turbine, k: 
         spans = [s_arc] + [x for x in np.arange(s_arc + 2.0, s_end + 0.1, 2.0)]
         if s_arc > s_end - 2.0:  # at the tip: go round beyond it too
             spans += [s_end + pp.required + 1.0]
-        for s in spans:
-            vias = []
-            if abs(s - sp) > 1e-6:
-                vias.append(hc + s * d + (p - hc - sp * d))
-            vias += _arc(turbine, k, s, gp, gq, radius if s <= s_end else rp)
-            if abs(s - sq) > 1e-6:
-                vias.append(hc + s * d + (q - hc - sq * d))
-            chain = np.array([p] + vias + [q])
-            ground = site.ground_z(chain[1:-1]) + pp.min_altitude if len(vias) else None
-            if ground is not None and (chain[1:-1, 2] < ground).any():
-                continue
-            if (site.clearance(chain[1:-1]) >= pp.required).all() and \
-                    (site.segment_clearance(chain[:-1], chain[1:], LEG_STEP) >= pp.leg_required).all():
-                wps += [WP(v, None, False, comp) for v in vias]
-                return
+        cands = []
+        for long_way in (False, True):
+            for s in spans:
+                vias = []
+                if abs(s - sp) > 1e-6:
+                    vias.append(hc + s * d + (p - hc - sp * d))
+                vias += _arc(turbine, k, s, gp, gq, radius if s <= s_end else rp, long_way)
+                if abs(s - sq) > 1e-6:
+                    vias.append(hc + s * d + (q - hc - sq * d))
+                cands.append(vias)
+        # All candidates checked at once; the first (nearest the passes' end) that clears wins.
+        legs0, legs1, owner, pts, pown = [], [], [], [], []
+        for i, vias in enumerate(cands):
+            chain = [p] + vias + [q]
+            legs0 += chain[:-1]
+            legs1 += chain[1:]
+            owner += [i] * (len(chain) - 1)
+            pts += vias
+            pown += [i] * len(vias)
+        good = np.ones(len(cands), bool)
+        lb = site.segment_clearance(np.array(legs0), np.array(legs1), LEG_STEP, pp.required + 1)
+        np.logical_and.at(good, np.array(owner), lb >= pp.leg_required)
+        if pts:
+            P = np.array(pts)
+            okp = (site.clearance(P, pp.required + 1) >= pp.required) & \
+                (P[:, 2] >= site.ground_z(P) + pp.min_altitude)
+            np.logical_and.at(good, np.array(pown), okp)
+        if good.any():
+            wps += [WP(v, None, False, comp) for v in cands[int(np.argmax(good))]]
+            return
     gmin = float(site.ground_z(np.array([p, q])).min()) + pp.min_altitude
     vias = connect(site, p, q, pp.leg_required, hints=[_unit(p - hc - sp * d)], ground=gmin)
     if vias is None:
@@ -292,7 +320,7 @@ class _Blocked(Exception):
 
 # ---- nacelle and tower (fixed) ------------------------------------------------------------------------
 def _filter_stations(site: Site, pp: PassParams, pos: np.ndarray) -> np.ndarray:
-    ok = site.clearance(pos) >= pp.required
+    ok = site.clearance(pos, pp.required + 1) >= pp.required
     ok &= pos[:, 2] >= site.ground_z(pos) + pp.min_altitude
     return ok
 
@@ -367,7 +395,7 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
                                                          prev[2] - turbine.base_xyz[2]])
                             for s in range(1, steps)]).reshape(-1, 3)
             if len(arc):
-                arc = arc[site.clearance(arc) >= pp.required]
+                arc = arc[site.clearance(arc, pp.required + 1) >= pp.required]
             new += [WP(v, None, False, comp) for v in arc]
         new += [WP(p, f, True, comp) for p, f in zip(pos[keep], fwd[keep])]
         append_chain(chunk, site, pp, new)
@@ -381,7 +409,7 @@ def append_chain(chunk: Chunk, site: Site, pp: PassParams, new: list[WP]) -> Non
     pts = np.array(([chunk.wps[-1].pos] if chunk.wps else []) + [w.pos for w in new])
     bad = np.zeros(len(new), bool)
     if len(pts) > 1:
-        lb = site.segment_clearance(pts[:-1], pts[1:], LEG_STEP)
+        lb = site.segment_clearance(pts[:-1], pts[1:], LEG_STEP, pp.required + 1)
         bad[len(new) - len(lb):] = lb < pp.leg_required
     for w, b in zip(new, bad):
         if b:

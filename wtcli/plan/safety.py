@@ -38,14 +38,49 @@ class Site:
         P = np.atleast_2d(points)
         return [np.nonzero(((P >= lo) & (P <= hi)).all(axis=1))[0] for lo, hi in zip(self.lo, self.hi)]
 
-    def clearance(self, points: np.ndarray) -> np.ndarray:
-        """(M,) distance to the nearest part of any turbine, capped at the horizon."""
+    def clearance(self, points: np.ndarray, cap: float | None = None) -> np.ndarray:
+        """(M,) distance to the nearest part of any turbine (``Turbine.clearance``'s lower bound),
+        capped at the horizon.
+
+        Speed: a part's exact distance is computed only for points whose cheap bound (distance
+        to a capsule or cylinder enclosing the part) is below ``cap`` (default: the horizon);
+        elsewhere the cheap bound, itself a lower bound of the true distance, stands in."""
         P = np.atleast_2d(np.asarray(points, float))
+        cap = self.horizon if cap is None else min(cap, self.horizon)
         out = np.full(len(P), self.horizon)
         for t, idx in zip(self.turbines, self.near(P)):
             if len(idx):
-                out[idx] = np.minimum(out[idx], t.clearance(P[idx]))
+                out[idx] = np.minimum(out[idx], self._turbine_clearance(t, P[idx], cap))
         return out
+
+    def _turbine_clearance(self, t: Turbine, P: np.ndarray, cap: float) -> np.ndarray:
+        out = np.full(len(P), np.inf)
+        # Blades: inside the capsule around the axis with the largest semi-axis as radius.
+        a_max = 0.5 * max(t.blade_root_chord, t.blade_max_chord, t.blade_tip_chord)
+        s0, s1 = t.blade_root_offset, t.tip_radius
+        hc = t.hub_center
+        for k in range(t.n_blades):
+            d = t.blade_direction(k)
+            q = P - hc
+            s = np.clip(q @ d, s0, s1)
+            bound = np.linalg.norm(q - s[:, None] * d, axis=1) - a_max
+            exact = bound < cap
+            val = np.maximum(bound, 0.0)
+            if exact.any():
+                val[exact] = t._blade_distance(P[exact], k)
+            out = np.minimum(out, val)
+        # Tower: inside the cylinder of its base radius; nacelle and hub are cheap.
+        q = P - t.base_xyz
+        rho = np.hypot(q[:, 0], q[:, 1])
+        dz = np.maximum(np.maximum(-q[:, 2], q[:, 2] - t.tower_height), 0.0)
+        bound = np.hypot(np.maximum(rho - t.tower_base_radius, 0.0), dz)
+        exact = bound < cap
+        val = bound.copy()
+        if exact.any():
+            val[exact] = t._tower_distance(P[exact])
+        out = np.minimum(out, val)
+        out = np.minimum(out, t._nacelle_distance(P))
+        return np.minimum(out, t._hub_distance(P))
 
     def nearest_part(self, point: np.ndarray) -> tuple[str, float]:
         """("T1 blade2", 2.3): the part of any turbine nearest a point, and its distance."""
@@ -57,7 +92,8 @@ class Site:
                 best = (f"{t.id} {t.part_names()[k]}", float(c[k]))
         return best
 
-    def segment_clearance(self, p0: np.ndarray, p1: np.ndarray, step: float = 0.5) -> np.ndarray:
+    def segment_clearance(self, p0: np.ndarray, p1: np.ndarray, step: float = 0.5,
+                          cap: float | None = None) -> np.ndarray:
         """Lower bound of the clearance along each straight leg p0[i] -> p1[i] (capped)."""
         p0 = np.atleast_2d(np.asarray(p0, float))
         p1 = np.atleast_2d(np.asarray(p1, float))
@@ -70,7 +106,7 @@ class Site:
         k = np.arange(len(seg)) - np.repeat(start, n + 1)
         t = k / np.repeat(n, n + 1)
         pts = p0[seg] + (p1 - p0)[seg] * t[:, None]
-        c = self.clearance(pts)
+        c = self.clearance(pts, cap)
         out = np.full(len(p0), np.inf)
         np.minimum.at(out, seg, c)
         return out - 0.5 * length / n
