@@ -256,30 +256,41 @@ def _region_centroid(inst: InstanceContours) -> np.ndarray:
     return np.array([m["m10"] / m["m00"] + x0, m["m01"] / m["m00"] + y0])
 
 
-def _supports(ax: Axis, length: float, c: np.ndarray) -> bool:
-    """Could ``c`` be this blade's hub: on its axis line, at (or a little beyond) one end?"""
+def _supports(ax: Axis, length: float, width: float, c: np.ndarray) -> bool:
+    """Could ``c`` be this blade's hub: on its axis line, at (or a little beyond) one end?
+    ``width`` (mean width, px) widens the tolerances for stubs cut short by the frame."""
     d = np.asarray(c, float) - np.asarray(ax.centroid)
     u = ax.direction
     t = float(d @ u)
     perp = abs(float(d[0] * u[1] - d[1] * u[0]))
-    if perp > 0.1 * length + 3.0:
+    if perp > 0.1 * length + 0.5 * width + 3.0:
         return False
-    near_low = ax.t_min - 0.5 * length <= t <= ax.t_min + 0.25 * length
-    near_high = ax.t_max - 0.25 * length <= t <= ax.t_max + 0.5 * length
+    slack = 0.25 * length + width
+    near_low = ax.t_min - 0.5 * length - width <= t <= ax.t_min + slack
+    near_high = ax.t_max - slack <= t <= ax.t_max + 0.5 * length + width
     return near_low or near_high
 
 
-def select_rotor(axes: list[Axis], areas: list[float],
+def _touches_border(inst: InstanceContours, image_size: tuple[int, int]) -> bool:
+    x0, y0, x1, y1 = inst.bbox
+    return x0 <= 0 or y0 <= 0 or x1 >= image_size[1] or y1 >= image_size[0]
+
+
+def select_rotor(blades: ContourSet, axes: list[Axis],
                  nacelle_points: list[np.ndarray]) -> tuple[list[int], np.ndarray | None]:
     """The blades of the main rotor when a photo shows several turbines.
 
     Candidate hubs are the nacelle centroids and the crossing points of pairs of blade axes
     that lie near an end of both blades; each candidate is supported by the blades whose axis
     passes through it near one of their ends. The candidate whose supporting blades cover the
-    most pixels wins (the inspected turbine is the nearest, largest one). Without any candidate
-    (one blade; two in line and no nacelle) every blade is kept."""
+    most pixels wins (the inspected turbine is the nearest, largest one). A small supporter
+    (< 30 % of the largest one's pixels, not cut by the frame) whose wider end is away from the
+    hub is a far turbine's blade pointing at it, and is left out. Without any candidate (one
+    blade; two in line and no nacelle) every blade is kept."""
     n = len(axes)
-    lengths = [ax.t_max - ax.t_min for ax in axes]
+    areas = [float(b.area) for b in blades]
+    lengths = [max(ax.t_max - ax.t_min, 1.0) for ax in axes]
+    widths = [a / L for a, L in zip(areas, lengths)]
     cands = [np.asarray(p, float) for p in nacelle_points]
     for i in range(n):
         for j in range(i + 1, n):
@@ -290,16 +301,30 @@ def select_rotor(axes: list[Axis], areas: list[float],
             d = np.asarray(axes[j].centroid) - np.asarray(axes[i].centroid)
             ti = (d[0] * uj[1] - d[1] * uj[0]) / cross
             x = np.asarray(axes[i].centroid) + ti * ui
-            if _supports(axes[i], lengths[i], x) and _supports(axes[j], lengths[j], x):
+            if (_supports(axes[i], lengths[i], widths[i], x)
+                    and _supports(axes[j], lengths[j], widths[j], x)):
                 cands.append(x)
     best, best_key, best_c = list(range(n)), None, None
     for c in cands:
-        sup = [k for k in range(n) if _supports(axes[k], lengths[k], c)]
+        sup = [k for k in range(n) if _supports(axes[k], lengths[k], widths[k], c)]
         if not sup:
             continue
         key = (sum(areas[k] for k in sup), len(sup))
         if best_key is None or key > best_key:
             best, best_key, best_c = sup, key, c
+    if best_c is not None and len(best) > 1:
+        big = max(areas[k] for k in best)
+        keep = []
+        for k in best:
+            inst = blades.instances[k]
+            if areas[k] < 0.3 * big and not _touches_border(inst, blades.image_size):
+                root = wider_end(inst, axes[k])
+                ends = (axes[k].point(axes[k].t_min), axes[k].point(axes[k].t_max))
+                far = max(ends, key=lambda e: float(np.linalg.norm(e - best_c)))
+                if np.allclose(root, far):
+                    continue
+            keep.append(k)
+        best = keep
     return best, best_c
 
 
@@ -428,8 +453,7 @@ def measure_pitch(contours: ContourSet, expected_blades: int | None = 3) -> Pitc
     check_blade_count(len(all_blades), None, contours.name, contours.dropped)
     all_axes = [principal_axis(b) for b in all_blades]
     nacelles = contours.of("nacelle")
-    keep, candidate = select_rotor(all_axes, [float(b.area) for b in all_blades],
-                                   [_region_centroid(n) for n in nacelles])
+    keep, candidate = select_rotor(all_blades, all_axes, [_region_centroid(n) for n in nacelles])
     blades = all_blades[keep]
     others = tuple(all_blades.instances[i].source_index for i in range(len(all_blades))
                    if i not in keep)
