@@ -182,11 +182,10 @@ def fly_route(route: Route, scn: Scenario, ground: Ground, uav_index: int, mode:
     """Fly one route. ``mode``: pid, feedforward or pilot (the route is retimed for the pilot)."""
     dt = 1.0 / scn.control.control_hz
     planned = planned or route
-    flown, photo_t = route, route.t[route.photo]
-    if mode == "pilot":
-        flown, photo_t = manual_route(route, scn.manual_pilot)
-    smoothing = 0.0 if mode == "pilot" else scn.control.reference_smoothing_s
-    ref = make_reference(flown.t, flown.pos, flown.yaw_deg, flown.gimbal_pitch_deg, dt, smoothing)
+    flown = manual_route(route, scn.manual_pilot)[0] if mode == "pilot" else route
+    c = scn.control
+    ref = make_reference(flown.t, flown.pos, flown.yaw_deg, flown.gimbal_pitch_deg, dt,
+                         c.reference_smoothing_s, c.reference_accel_ms2, c.corner_deviation_m)
     n = len(ref.t)
     g_ref = ground.height(ref.pos)
     h_rep = float(np.median(ref.pos[:, 2] - g_ref))
@@ -198,7 +197,7 @@ def fly_route(route: Route, scn: Scenario, ground: Ground, uav_index: int, mode:
         pilot = pilot_inputs(scn.manual_pilot, n, dt, prng)
     track = fly(ref, scn, wind, g_ref, mode, _rng(scn, uav_index, _SENSOR), pilot)
 
-    steps = np.clip(np.round((photo_t - ref.t[0]) / dt).astype(int), 0, n - 1)
+    steps = ref.reach_step(np.nonzero(flown.photo)[0])  # photos when the set-point gets there
     yaw = track.yaw_deg[steps].copy()
     pitch = track.pitch_deg[steps].copy()
     if mode == "pilot" and len(steps):
@@ -206,8 +205,7 @@ def fly_route(route: Route, scn: Scenario, ground: Ground, uav_index: int, mode:
         yaw += aim[:, 0]
         pitch += aim[:, 1]
     roll = _camera_roll(track, steps, yaw, scn.vehicle.gimbal_roll_leak)
-    comp = flown.component[flown.photo] if flown.photo.sum() == len(steps) else \
-        np.array([""] * len(steps), dtype=object)
+    comp = flown.component[flown.photo]
     return UavFlight(uav=route.uav, route=flown, planned=planned, ref=ref, track=track,
                      photo_step=steps, photo_yaw_deg=yaw, photo_pitch_deg=pitch,
                      photo_roll_deg=roll, photo_component=comp,
@@ -227,14 +225,13 @@ def _camera_roll(track: Track, steps: np.ndarray, yaw_deg: np.ndarray, leak: flo
 
 # ---- measuring --------------------------------------------------------------------------------
 
-def path_deviation(route: Route, t: np.ndarray, pos: np.ndarray, window: int = 8,
+def path_deviation(path: np.ndarray, segment: np.ndarray, pos: np.ndarray, window: int = 8,
                    chunk: int = 8192) -> np.ndarray:
-    """Distance from each position to the planned polyline, searched among the ``window``
-    segments either side of the one being flown at that time (vectorised)."""
-    a_all, b_all = route.pos[:-1], route.pos[1:]
+    """Distance from each position to the planned polyline ``path`` (M, 3), searched among the
+    ``window`` segments either side of ``segment`` (the one the set-point is on), vectorised."""
+    a_all, b_all = path[:-1], path[1:]
     m = len(a_all)
-    tw = route.t + np.arange(len(route)) * 1e-9
-    j = np.clip(np.searchsorted(tw, t, side="right") - 1, 0, m - 1)
+    j = np.clip(np.asarray(segment, int), 0, m - 1)
     offs = np.arange(-window, window + 1)
     out = np.empty(len(pos))
     for s in range(0, len(pos), chunk):
@@ -310,14 +307,13 @@ def measure(kind: str, controller: str, plan: Plan, flights: list[UavFlight], sc
         times.append(float(tr.t[k_end] - tr.t[0]))
         sl = slice(0, k_end + 1)
         pos = tr.pos[sl]
-        devs.append(path_deviation(f.route, tr.t[sl], pos))  # same geometry as planned
+        devs.append(path_deviation(f.route.pos, np.floor(ref.wp_index[sl]).astype(int), pos))
         trks.append(np.linalg.norm(pos - ref.pos[sl], axis=1))
         pos_all.append(pos)
         t_all.append(tr.t[sl])
         uav_all.append(np.full(len(pos), f.uav, dtype=object))
         ref_all.append(ref.pos[sl])
-        rt = f.route.t + np.arange(len(f.route)) * 1e-9
-        seg = np.clip(np.searchsorted(rt, tr.t[sl], side="right"), 0, len(f.route) - 1)
+        seg = np.clip(np.floor(ref.wp_index[sl]).astype(int) + 1, 0, len(f.route) - 1)
         comp_all.append(f.route.component[seg])
     P = np.concatenate(pos_all)
     T = np.concatenate(t_all)

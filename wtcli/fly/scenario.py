@@ -74,6 +74,8 @@ class Vehicle:
 class Control:
     physics_hz: float
     control_hz: float
+    reference_accel_ms2: float
+    corner_deviation_m: float
     reference_smoothing_s: float
 
 
@@ -168,6 +170,7 @@ _NUM = {
                 "battery_wh": (1, 20000, False), "propulsion_efficiency": (0.05, 1, False),
                 "position_noise_m": (0, 5, False), "velocity_noise_ms": (0, 5, False)},
     "control": {"physics_hz": (5, 1000, False), "control_hz": (1, 500, False),
+                "reference_accel_ms2": (0.1, 20, False), "corner_deviation_m": (0, 5, False),
                 "reference_smoothing_s": (0, 10, False)},
     "gains": {"kp": (0, 20, False), "ki": (0, 20, False), "kd": (0, 20, False),
               "derivative_filter_s": (0, 5, False), "integral_limit_ms": (0, 30, False)},

@@ -49,6 +49,12 @@ class Reference:
     yaw_deg: np.ndarray  # (N,) unwrapped
     pitch_deg: np.ndarray  # (N,)
     end_index: int  # first index after the route's last waypoint time
+    wp_index: np.ndarray  # (N,) fractional waypoint index of the set-point
+
+    def reach_step(self, waypoint: np.ndarray) -> np.ndarray:
+        """First step at which the set-point reaches each waypoint index."""
+        k = np.searchsorted(self.wp_index, np.asarray(waypoint, float) - 1e-9, side="left")
+        return np.clip(k, 0, len(self.t) - 1)
 
 
 def _box(x: np.ndarray, width: int) -> np.ndarray:
@@ -61,22 +67,88 @@ def _box(x: np.ndarray, width: int) -> np.ndarray:
     return (c[width:] - c[:-width]) / width
 
 
+def corner_speeds(pos: np.ndarray, v_leg: np.ndarray, accel: float, corner_m: float) -> np.ndarray:
+    """Speed allowed through each waypoint: 0 at the ends and around zero-length legs, the
+    "junction deviation" limit sqrt(a d sin(q/2) / (1 - sin(q/2))) at a turn of interior angle
+    q (straight on: q = 180 deg, no limit), and never above either leg's speed."""
+    m = len(pos)
+    seg = np.diff(pos, axis=0)
+    L = np.linalg.norm(seg, axis=1)
+    u = seg / np.maximum(L, 1e-12)[:, None]
+    vc = np.zeros(m)
+    if m < 3:
+        return vc
+    a_in, a_out = u[:-1], u[1:]
+    cos_q = np.clip(-(a_in * a_out).sum(1), -1.0, 1.0)  # interior angle between the legs
+    sh = np.sqrt((1 - cos_q) / 2)  # sin(q/2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lim = np.where(sh > 0.9999, np.inf, np.sqrt(accel * corner_m * sh / np.maximum(1 - sh, 1e-9)))
+    inner = np.minimum(np.minimum(v_leg[:-1], v_leg[1:]), lim)
+    zero = (L[:-1] < 1e-6) | (L[1:] < 1e-6)
+    vc[1:-1] = np.where(zero, 0.0, inner)
+    return vc
+
+
 def make_reference(t_wp: np.ndarray, pos_wp: np.ndarray, yaw_wp: np.ndarray, pitch_wp: np.ndarray,
-                   dt: float, smoothing_s: float) -> Reference:
-    t0, t1 = float(t_wp[0]), float(t_wp[-1])
-    n_end = int(math.ceil((t1 - t0) / dt)) + 1
+                   dt: float, smoothing_s: float, accel: float = 2.5, corner_m: float = 0.05,
+                   ) -> Reference:
+    """The set-point an autopilot's mission mode follows: the planned polyline exactly, each leg
+    at the planned speed (its length over its planned duration) with trapezoidal speed changes
+    at ``accel`` and corners taken at the junction-deviation speed; zero-length legs (hover,
+    turning on the spot) keep their planned duration. Time therefore runs a little behind the
+    plan at corners; photos are triggered when the set-point reaches their waypoint."""
+    tw = np.asarray(t_wp, float)
+    P = np.asarray(pos_wp, float)
+    seg = np.diff(P, axis=0)
+    L = np.linalg.norm(seg, axis=1)
+    dtp = np.maximum(np.diff(tw), 0.0)
+    moving = L > 1e-6
+    v_leg = np.where(moving, L / np.maximum(dtp, 1e-9), 0.0)
+    v_leg = np.where(moving & (dtp <= 1e-9), 1e3, v_leg)  # an untimed leg: as fast as allowed
+    a = float(accel)
+    vc = corner_speeds(P, v_leg, a, corner_m)
+    # Forward and backward passes: reachable with |acceleration| <= a along each leg.
+    for j in range(len(L)):
+        vc[j + 1] = min(vc[j + 1], math.sqrt(vc[j] ** 2 + 2 * a * L[j]))
+    for j in range(len(L) - 1, -1, -1):
+        vc[j] = min(vc[j], math.sqrt(vc[j + 1] ** 2 + 2 * a * L[j]))
+    v0, v1 = vc[:-1], vc[1:]
+    vp = np.where(moving, np.minimum(v_leg, np.sqrt((2 * a * L + v0 ** 2 + v1 ** 2) / 2)), 0.0)
+    vp = np.maximum(vp, np.maximum(v0, v1))
+    d_acc = np.where(moving, (vp ** 2 - v0 ** 2) / (2 * a), 0.0)
+    d_dec = np.where(moving, (vp ** 2 - v1 ** 2) / (2 * a), 0.0)
+    d_cru = np.maximum(L - d_acc - d_dec, 0.0)
+    t_acc = np.where(moving, (vp - v0) / a, 0.0)
+    t_dec = np.where(moving, (vp - v1) / a, 0.0)
+    t_cru = np.where(moving, d_cru / np.maximum(vp, 1e-9), 0.0)
+    t_leg = np.where(moving, t_acc + t_cru + t_dec, dtp)
+    T = np.concatenate([[tw[0]], tw[0] + np.cumsum(t_leg)])
+    n_end = int(math.ceil((T[-1] - T[0]) / dt)) + 1
     n = n_end + int(round(SETTLE_S / dt))
-    t = t0 + np.arange(n) * dt
-    # np.interp needs increasing xp; nudge repeated times (a hover) apart by a hair.
-    tw = np.asarray(t_wp, float) + np.arange(len(t_wp)) * 1e-9
-    pos = np.stack([np.interp(t, tw, pos_wp[:, i]) for i in range(3)], 1)
+    t = T[0] + np.arange(n) * dt
+    j = np.clip(np.searchsorted(T, t, side="right") - 1, 0, len(L) - 1)
+    tau = np.clip(t - T[j], 0.0, t_leg[j])
+    ta, tc = t_acc[j], t_cru[j]
+    s = np.where(tau < ta, v0[j] * tau + 0.5 * a * tau ** 2,
+                 np.where(tau < ta + tc, d_acc[j] + vp[j] * (tau - ta),
+                          d_acc[j] + d_cru[j] + vp[j] * (tau - ta - tc)
+                          - 0.5 * a * (tau - ta - tc) ** 2))
+    s = np.clip(np.where(moving[j], s, 0.0), 0.0, L[j])
+    frac = np.where(moving[j], s / np.maximum(L[j], 1e-12),
+                    tau / np.maximum(t_leg[j], 1e-9))
+    frac = np.where(t >= T[-1], 1.0, frac)
+    u = j + frac  # fractional waypoint index
+    pos = P[j] + (seg[j] / np.maximum(L[j], 1e-12)[:, None]) * s[:, None]
+    pos[t >= T[-1]] = P[-1]
     width = max(1, int(round(smoothing_s / dt)) | 1)
-    pos = _box(_box(pos, width), width) if width > 1 else pos
+    if width > 1:
+        pos = _box(pos, width)
     vel = np.gradient(pos, dt, axis=0)
     acc = np.gradient(vel, dt, axis=0)
-    yaw = np.interp(t, tw, np.degrees(np.unwrap(np.radians(yaw_wp))))
-    pitch = np.interp(t, tw, pitch_wp)
-    return Reference(t, pos, vel, acc, yaw, pitch, n_end)
+    idx = np.arange(len(P), dtype=float)
+    yaw = np.interp(u, idx, np.degrees(np.unwrap(np.radians(yaw_wp))))
+    pitch = np.interp(u, idx, pitch_wp)
+    return Reference(t, pos, vel, acc, yaw, pitch, n_end, u)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,105 @@
+"""Whole runs: plan from a scenario's mission (if no plan is given), fly, and the paper's table.
+
+``run_scenario`` is what ``wtinspect fly`` calls; ``paper_table`` flies the four shipped
+scenarios of the paper's Table 1 (automated and manual) and sets our figures beside the paper's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wtcli.errors import ConfigError
+from wtcli.fly.flight import FlightReport, fly_plan
+from wtcli.fly.scenario import Scenario, load_scenario, shipped_scenarios
+from wtcli.plan_file import Plan, read_plan
+
+PAPER_SCENARIOS = ("paper-s1", "paper-s2", "paper-s3", "paper-s4")
+# The relative changes the paper states in its abstract and section IV (manual -> automated).
+PAPER_STATED = {"time_min": -78.0, "length_m": -17.0, "coverage_pct": 6.0, "deviation_m": -68.0}
+METRICS = ("time_min", "length_m", "coverage_pct", "deviation_m")
+
+
+def plan_from_mission(scn: Scenario, pattern: str = "adaptive") -> Plan:
+    """Plan the scenario's mission with the planner (``wtcli.plan``)."""
+    if scn.mission is None:
+        raise ConfigError(f"{scn.source or scn.name}: the scenario names no 'mission' file; give "
+                          "a plan JSON or add 'mission: turbines.yaml' to the scenario")
+    from wtcli.plan.config import load_mission
+    from wtcli.plan.mission import plan_mission
+
+    mission = load_mission(scn.mission)
+    return plan_mission(mission, azimuths=scn.azimuths, pattern=pattern)
+
+
+def run_scenario(scn: Scenario, plan_path: str | Path | None = None, baselines: bool = False,
+                 ) -> FlightReport:
+    """Fly a plan file (or the plan of the scenario's mission) and, optionally, the baselines."""
+    if plan_path is not None:
+        plan = read_plan(plan_path)
+        source = str(plan_path)
+    else:
+        plan = plan_from_mission(scn)
+        source = f"planned from {scn.mission}"
+    fixed = None
+    if baselines and scn.baselines.fixed_pattern and scn.mission is not None:
+        fixed = plan_from_mission(scn, pattern="fixed-y")
+    return fly_plan(plan, scn, baselines=baselines, fixed_plan=fixed, plan_source=source)
+
+
+@dataclass(frozen=True)
+class PaperRow:
+    name: str
+    label: str  # the paper's scenario text
+    paper: dict  # {"manual": {metric: v}, "automated": {...}}
+    ours: dict  # same shape
+    report: FlightReport
+
+    def change(self, who: str, metric: str) -> float:
+        m, a = self[who]["manual"][metric], self[who]["automated"][metric]
+        if metric == "coverage_pct":
+            return a - m  # points
+        return 100.0 * (a - m) / m if m else float("nan")
+
+    def __getitem__(self, who: str) -> dict:
+        return {"paper": self.paper, "ours": self.ours}[who]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"scenario": self.name, "label": self.label, "paper": self.paper, "ours": self.ours,
+                "change": {who: {m: self.change(who, m) for m in METRICS} for who in ("paper", "ours")},
+                "strong_checks": {
+                    "min_clearance_m": self.report.automated.min_clearance_m,
+                    "violations": len(self.report.automated.violations),
+                    "deviation_rms_m": float(np.sqrt((self.report.automated.deviation ** 2).mean())),
+                    "deviation_max_m": float(self.report.automated.deviation.max())}}
+
+
+def paper_table(names: tuple[str, ...] = PAPER_SCENARIOS, seed: int | None = None) -> list[PaperRow]:
+    """Fly the paper's four scenarios (automated and manual only) and collect Table 1."""
+    shipped = shipped_scenarios()
+    rows = []
+    for name in names:
+        scn = load_scenario(shipped[name])
+        if seed is not None:
+            scn = scn.with_seed(seed)
+        plan = plan_from_mission(scn)
+        from dataclasses import replace
+        scn_m = replace(scn, baselines=replace(scn.baselines, no_compensation=False,
+                                               fixed_pattern=False, manual=True))
+        report = fly_plan(plan, scn_m, baselines=True, plan_source=f"planned from {scn.mission}")
+        ours = {"manual": report.flights["manual"].summary(),
+                "automated": report.automated.summary()}
+        ours = {k: {m: float(v[m]) for m in METRICS} for k, v in ours.items()}
+        paper = scn.paper or {"scenario": scn.description, "manual": {}, "automated": {}}
+        rows.append(PaperRow(name=name, label=paper.get("scenario", scn.description),
+                             paper={k: paper[k] for k in ("manual", "automated")}, ours=ours,
+                             report=report))
+    return rows
+
+
+def mean_changes(rows: list[PaperRow]) -> dict[str, dict[str, float]]:
+    return {who: {m: float(np.mean([r.change(who, m) for r in rows])) for m in METRICS}
+            for who in ("paper", "ours")}
