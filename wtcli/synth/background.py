@@ -34,6 +34,46 @@ _LAND = {
 }
 
 
+_BUSH_BANK: list[np.ndarray] = []
+BUSH_TILE = 512
+BUSH_TILE_M = 0.5  # metres per texel of a bank tile before the scene's own scale
+
+
+def _bush_bank() -> list[np.ndarray]:
+    """Three tiles of scattered bushes, made once per process from a fixed seed (so every scene
+    stays a pure function of its own seed). Channels: coverage, rank (a bush shows where the
+    local density exceeds its rank), shade (lit top, dark shadowed side), soil grain."""
+    if _BUSH_BANK:
+        return _BUSH_BANK
+    rng = np.random.default_rng(20261123)
+    T = BUSH_TILE
+    for _ in range(3):
+        cov = np.zeros((T, T), np.float32)
+        rank = np.ones((T, T), np.float32)
+        shade = np.full((T, T), 0.5, np.float32)
+        n = 9000
+        xs, ys = rng.uniform(0, T, n), rng.uniform(0, T, n)
+        rs = np.exp(rng.uniform(np.log(1.5), np.log(6.0), n))
+        rk = rng.random(n)
+        order = np.argsort(-rk)  # low ranks (shown first) drawn last, on top
+        for i in order:
+            for ox in (0, -T, T):  # wrap across the tile's edges
+                for oy in (0, -T, T):
+                    cx, cy = xs[i] + ox, ys[i] + oy
+                    if -8 < cx < T + 8 and -8 < cy < T + 8:
+                        c = (int(cx * 16), int(cy * 16))
+                        r = int(rs[i] * 16)
+                        cv2.circle(cov, c, r, 1.0, -1, cv2.LINE_AA, 4)
+                        cv2.circle(rank, c, r, float(rk[i]), -1, cv2.LINE_8, 4)
+                        cv2.circle(shade, c, r, 0.25, -1, cv2.LINE_8, 4)
+                        hl = (int((cx - 0.3 * rs[i]) * 16), int((cy - 0.3 * rs[i]) * 16))
+                        cv2.circle(shade, hl, int(r * 0.55), 0.85, -1, cv2.LINE_AA, 4)
+        shade = cv2.GaussianBlur(shade, (0, 0), 0.8)
+        grain = tile_fbm(rng, T, 128, octaves=2)
+        _BUSH_BANK.append(np.ascontiguousarray(np.dstack([cov, rank, shade, grain])))
+    return _BUSH_BANK
+
+
 def _jitter(rng: np.random.Generator, c, amount: float = 0.04) -> np.ndarray:
     return np.clip(np.asarray(c, np.float32) + rng.normal(0, amount, 3).astype(np.float32), 0, 1)
 
@@ -74,7 +114,39 @@ def pixel_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def render_background(camera: Camera, env: Environment, turbine: Turbine,
                       rng: np.random.Generator, zenith: np.ndarray, horizon: np.ndarray) -> np.ndarray:
+    """The background, BGR float32 (H, W, 3). Smooth fields (sky, clouds, land colour, haze,
+    sea, ridges) are computed on a half-resolution grid of the same camera and enlarged; the
+    ground's fine detail (bushes, soil grain) is sampled at full resolution on top."""
     H, W = camera.height_px, camera.width_px
+    f = 2 if W * H >= 100_000 else 1
+    lo = Camera(-(-W // f), -(-H // f), camera.focal_mm, camera.sensor_width_mm,
+                camera.position, camera.R)
+    img, det = _background_lo(lo, env, turbine, rng, zenith, horizon, f)
+    if f > 1:
+        img = cv2.resize(img, (W, H), interpolation=cv2.INTER_LINEAR)
+    if det is None:
+        return img
+    # Enlarge the smooth per-pixel fields in one go, then draw the bushes at full resolution:
+    # pixel = bare ground + bush coverage * (lit, hazed bush colour - bare ground).
+    packed = np.dstack([det["X"], det["Y"], det["w"], det["dens"], det["land"], det["k"],
+                        det["hazefog"]]).astype(np.float32)
+    if f > 1:
+        packed = cv2.resize(packed, (W, H), interpolation=cv2.INTER_LINEAR)
+    X, Y, w, dens, land, k = (packed[..., i] for i in range(6))
+    hazefog = packed[..., 6:9]
+    m = det["m"]
+    fs = _remap_wrap(det["tile"], X / m, -Y / m)
+    near = smoothstep(-0.06, 0.0, dens - fs[..., 1]) * fs[..., 0]
+    bm = (w * near + (1 - w) * dens * det["cover"]) * land
+    shade = (w * fs[..., 2] + (1 - w) * 0.45)
+    bush = det["bush"] * (0.55 + 0.9 * shade)[..., None] * k[..., None] + hazefog
+    grain = 1.0 + w * land * (fs[..., 3] - 0.5) * det["grain"]
+    img = img * grain[..., None]
+    return img + bm[..., None] * (bush - img)
+
+
+def _background_lo(camera: Camera, env: Environment, turbine: Turbine, rng: np.random.Generator,
+                   zenith: np.ndarray, horizon: np.ndarray, f: int):
     dx, dy, dz = pixel_rays(camera)
     sun = sun_direction(env).astype(np.float32)
     cos_sun = dx * sun[0] + dy * sun[1] + dz * sun[2]
@@ -110,7 +182,7 @@ def render_background(camera: Camera, env: Environment, turbine: Turbine,
     dens = smoothstep(1.0 - cov - 0.15, 1.0 - cov + 0.25, cn) * smoothstep(0.01, 0.18, dz) * up
     if env.sky == "overcast":
         dens = np.maximum(dens, 0.85 * smoothstep(0.0, 0.05, dz))
-        base = float(rng.uniform(0.55, 0.8))
+        base = float(rng.uniform(0.42, 0.75))
         ccol = (base * (0.75 + 0.45 * sn))[..., None] * np.array([1.0, 1.0, 0.98], np.float32)
     else:
         lit = 0.82 + 0.2 * s
@@ -122,20 +194,18 @@ def render_background(camera: Camera, env: Environment, turbine: Turbine,
 
     # ---- ground (flat, z = 0) -----------------------------------------------------------------
     img = sky
+    det = None
     down = dz < -1e-4
     if down.any():
-        img = _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img)
+        img, det = _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img, f)
     if env.hills:
-        img = _hills(camera, env, rng, dz, elev, az, horizon, img)
-    return np.clip(img, 0, 1.2)
+        img, hill = _hills(camera, env, rng, dz, elev, az, horizon, img)
+        if det is not None:
+            det["land"] = det["land"] * (1.0 - hill)
+    return np.clip(img, 0, 1.2), det
 
 
-def _haze(col: np.ndarray, dist: np.ndarray, env: Environment, haze_col: np.ndarray) -> np.ndarray:
-    fog = 1.0 - np.exp(-dist / env.visibility_m)
-    return col * (1 - fog[..., None]) + haze_col * fog[..., None]
-
-
-def _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img):
+def _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img, scale):
     H, W = dz.shape
     h = max(float(camera.position[2]), 0.5)
     tt = np.minimum(h / np.maximum(-dz, 1e-6), MAX_GROUND_M)
@@ -190,31 +260,28 @@ def _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img
     cv2.circle(land, (int(bx) % T, int(by) % T), pad, road, -1, cv2.LINE_AA)
     land_blur = cv2.GaussianBlur(land, (0, 0), 3)
 
-    # Bushes / trees / crop texture: a fine tile, ~0.4-1 m per texel (bushes of 1.5-5 m).
-    TF = 512
-    mF = float(rng.uniform(0.4, 1.0))
-    bush = tile_fbm(rng, TF, int(rng.integers(80, 160)), octaves=2, gain=0.5)
-    fine = tile_fbm(rng, TF, 160, octaves=2)
-    fine_tile = np.ascontiguousarray(np.dstack([bush, fine]))
-    amount = {"scrub": 0.8, "fields": 0.3, "forest": 0.9, "dry": 0.45}[env.ground]
-    thr = float(rng.uniform(0.45, 0.62))
-    cover = float(smoothstep(thr, thr + 0.1, bush).mean())
+    # Bushes / trees: a tile of the bush bank at the scene's scale (bushes of ~1-6 m).
+    tile = _bush_bank()[int(rng.integers(len(_bush_bank())))]
+    mF = BUSH_TILE_M * float(rng.uniform(0.6, 1.5))
+    amount = {"scrub": float(rng.uniform(0.5, 0.85)), "fields": float(rng.uniform(0.05, 0.3)),
+              "forest": float(rng.uniform(0.85, 1.0)), "dry": float(rng.uniform(0.15, 0.5))}[env.ground]
+    cover = 0.8  # share of a bush's footprint its disc covers, on average (far-field mix)
 
-    # Metres per pixel on the ground: picks texture detail vs its average (no aliasing).
+    # Metres per pixel on the ground: picks texture detail vs its average (no aliasing). The
+    # bushes themselves are drawn at full resolution by render_background from `det`.
     foot = tt / camera.fx / np.sqrt(np.maximum(-dz, 0.02))
-    w_fine = np.clip(1.2 * mF / np.maximum(foot, 1e-6), 0, 1)
+    w_fine = np.clip(1.2 * scale * mF / np.maximum(foot, 1e-6), 0, 1)
     w_land = np.clip(1.5 * mL / np.maximum(foot, 1e-6), 0, 1)[..., None]
     lx, ly = X / mL, -Y / mL
     lc = _remap_wrap(land, lx, ly) * w_land + _remap_wrap(land_blur, lx, ly) * (1 - w_land)
-    fs = _remap_wrap(fine_tile, X / mF, -Y / mF)
-    bm = smoothstep(thr, thr + 0.1, fs[..., 0]) * w_fine + cover * (1 - w_fine)
-    bm = bm * amount * lc[..., 3]
-    fn = fs[..., 1] * w_fine + 0.5 * (1 - w_fine)
-    col = lc[..., :3] * (1 - bm[..., None]) + bush_col * bm[..., None]
-    col = col * (0.85 + 0.3 * fn[..., None])
+    dens = np.clip(amount * (0.4 + 0.9 * lc[..., 3]), 0, 1).astype(np.float32)
+    col = lc[..., :3]
     # Light: sun on flat ground, sky light everywhere.
     light = 0.5 + 0.6 * env.sun_strength * max(math.sin(math.radians(env.sun_elevation_deg)), 0.1)
     col = col * light
+    if env.backlit:  # the side of everything facing the camera is in shade
+        light *= 0.7
+        col = col * 0.7
 
     if env.sea_distance_m is not None:
         b = math.radians(env.sea_bearing_deg)
@@ -226,15 +293,15 @@ def _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img
         ai = np.mod((across / 20.0).astype(np.int64), 4096)
         coast = env.sea_distance_m + (prof[ai] - 0.5) * float(rng.uniform(200, 1500))
         sea = along > coast
-        deep = _jitter(rng, (0.42, 0.26, 0.06), 0.05)
+        deep = _jitter(rng, (0.45, 0.27, 0.06), 0.05)
         if env.sky == "overcast":
-            deep = deep * 0.6 + 0.25
-        fres = 0.03 + 0.9 * (1 - np.abs(dz)) ** 6
-        sea_col = deep * (1 - fres[..., None]) + horizon * fres[..., None]
+            deep = deep * 0.6 + np.array([0.25, 0.2, 0.15], np.float32)
+        fres = 0.03 + 0.8 * (1 - np.abs(dz)) ** 8
+        sea_col = deep * (1 - fres[..., None]) + horizon * 0.9 * fres[..., None]
         # Sun glitter: reflection of the sun on waves.
         sun = sun_direction(env)
         refl = dx * sun[0] + dy * sun[1] - dz * sun[2]
-        waves = _remap_wrap(fine, X / 2.0, Y / 0.7)
+        waves = _remap_wrap(np.ascontiguousarray(tile[..., 3]), X / 1.5, Y / 0.5)
         glit = env.sun_strength * np.exp((refl - 1) / 0.004) * smoothstep(0.55, 0.8, waves)
         sea_col = sea_col + glit[..., None] * 0.8
         shore = sea & (along < coast + 15)
@@ -242,19 +309,28 @@ def _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img
         col = np.where(sea[..., None], sea_col, col)
 
     haze_col = horizon + (glow * 0.6)[..., None] * (1 - horizon)
-    col = _haze(col, tt, env, haze_col)
+    fog = 1.0 - np.exp(-tt / env.visibility_m)
+    col = col * (1 - fog[..., None]) + haze_col * fog[..., None]
     # Soft horizon: blend the last fraction of a degree into the sky.
-    edge = smoothstep(0.0, 0.004, -dz)[..., None]
-    col = col * edge + sky * (1 - edge)
-    return np.where(down[..., None], col, img)
+    edge = smoothstep(0.0, 0.004, -dz)
+    col = col * edge[..., None] + sky * (1 - edge[..., None])
+    land = (edge * down).astype(np.float32)
+    if env.sea_distance_m is not None:
+        land = land * ~sea
+    det = {"X": X, "Y": Y, "w": w_fine, "dens": dens, "land": land,
+           "k": (light * (1 - fog)).astype(np.float32),
+           "hazefog": (haze_col * fog[..., None]).astype(np.float32),
+           "tile": tile, "m": mF, "cover": cover, "bush": bush_col,
+           "grain": float(rng.uniform(0.15, 0.4))}
+    return np.where(down[..., None], col, img), det
 
 
 def _hills(camera, env, rng, dz, elev, az, horizon, img):
     hcam = float(camera.position[2])
-    far = None
+    hill = np.zeros(dz.shape, np.float32)
     for layer in range(env.hills):
         D = float(rng.uniform(5000, 15000)) if layer == 0 else float(rng.uniform(1200, 4500))
-        height = float(rng.uniform(150, 800)) if layer == 0 else float(rng.uniform(60, 350))
+        height = float(rng.uniform(200, 1000)) if layer == 0 else float(rng.uniform(80, 400))
         prof = noise_1d(rng, 3600, int(rng.integers(3, 12)), octaves=6, gain=0.5)
         prof = np.clip((prof - 0.35) / 0.65, 0, 1) ** float(rng.uniform(0.8, 1.6))
         ridge = np.degrees(np.arctan((height * prof - hcam) / D))
@@ -269,11 +345,10 @@ def _hills(camera, env, rng, dz, elev, az, horizon, img):
         H, W = dz.shape
         tex = fbm(rng, H, W, float(rng.uniform(20, 60)), octaves=4)
         col = base * (0.7 + 0.6 * tex[..., None])
-        vis = env.visibility_m * (1.0 if far is None else 1.0)
-        fog = 1.0 - math.exp(-D / vis)
+        fog = 1.0 - math.exp(-D / env.visibility_m)
         col = col * (1 - fog) + horizon * fog * np.array([1.0, 0.98, 0.96], np.float32)
         # Antialias the ridge line.
-        a = smoothstep(0.0, 0.08, r - elev)[..., None] * mask[..., None]
-        img = img * (1 - a) + col * a
-        far = D
-    return img
+        a = smoothstep(0.0, 0.08, r - elev) * mask
+        img = img * (1 - a[..., None]) + col * a[..., None]
+        hill = np.maximum(hill, a)
+    return img, hill

@@ -18,10 +18,13 @@ def camera_effects(img: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarra
     gamma = float(rng.uniform(0.8, 1.25))
     wb = (1.0 + rng.normal(0, 0.035, 3)).astype(np.float32)
     fx.update(exposure=gain, gamma=gamma, white_balance=wb.tolist())
-    img = np.clip(img * gain * wb, 0, None)
-    # Soft highlight roll-off, then gamma.
-    img = 1.0 - np.exp(-img * 1.6) if rng.random() < 0.3 else np.clip(img, 0, 1)
-    img = np.power(np.clip(img, 0, 1), gamma)
+    # Exposure and white balance, then a tone curve (optional soft highlight roll-off, gamma)
+    # applied as a lookup table.
+    x = np.linspace(0, 2, 2049, dtype=np.float32)
+    curve = 1.0 - np.exp(-x * 1.6) if rng.random() < 0.3 else np.clip(x, 0, 1)
+    curve = np.power(np.clip(curve, 0, 1), gamma).astype(np.float32)
+    idx = np.clip(img * (gain * wb * 1024.0), 0, 2048).astype(np.int32)
+    img = curve[idx]
     sat = float(rng.uniform(0.75, 1.25))
     grey = img.mean(axis=2, keepdims=True)
     img = grey + (img - grey) * sat
@@ -50,8 +53,8 @@ def camera_effects(img: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarra
         fx["blur"] = {"kind": "motion", "length_px": n, "angle_deg": ang}
     sigma = float(rng.uniform(0.0, 0.018))
     if sigma > 0.002:
-        noise = rng.normal(0, sigma, (H, W, 1)).astype(np.float32)
-        chroma = rng.normal(0, sigma * 0.4, (H, W, 3)).astype(np.float32)
+        noise = rng.standard_normal((H, W, 1), dtype=np.float32) * np.float32(sigma)
+        chroma = rng.standard_normal((H, W, 3), dtype=np.float32) * np.float32(sigma * 0.4)
         img = img + noise + chroma
     fx["noise_sigma"] = sigma
     out = np.clip(img * 255.0 + 0.5, 0, 255).astype(np.uint8)

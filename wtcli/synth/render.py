@@ -206,8 +206,10 @@ def _shade(turbines, owner, local, centroid, normal, to_cam, depth, env, rng, ze
                 colour = _LOGO_COLOURS[int(rng.integers(len(_LOGO_COLOURS)))]
                 albedo[np.nonzero(b)[0][stripe]] = colour
     nz = normal[:, 2:3]
-    sky_amb = (0.6 * horizon + 0.4 * zenith) * (0.55 + 0.35 * (1 - s))
-    ground_amb = np.array([0.36, 0.44, 0.48], np.float32) * (0.35 + 0.35 * s)
+    # Ambient: the sky dome above, light bounced off the ground below. Under overcast skies the
+    # dome is the only light and photos expose for it, so white paint still reads near white.
+    sky_amb = (0.6 * horizon + 0.4 * zenith) * (0.62 + 0.55 * (1 - s)) * float(rng.uniform(0.9, 1.15))
+    ground_amb = np.array([0.36, 0.44, 0.48], np.float32) * (0.5 + 0.3 * s)
     amb = sky_amb * (0.5 + 0.5 * nz) + ground_amb * (0.5 - 0.5 * nz)
     ndl = np.clip(normal @ L, 0, None)[:, None]
     sun_col = np.array([0.97, 0.99, 1.0], np.float32) if env.sky != "sunset" else \

@@ -211,7 +211,7 @@ def _sample_environment(rng: np.random.Generator, turbine: Turbine, camera: Came
              "overcast": rng.uniform(0.75, 1.0), "sunset": rng.uniform(0.1, 0.6)}[sky]
     ground = _choice(rng, GROUNDS, GROUND_ODDS)
     sea_d = None
-    if ground == "sea" or rng.random() < 0.35:
+    if ground == "sea" or rng.random() < 0.5:
         sea_d = float(rng.uniform(-400, 200)) if ground == "sea" else float(rng.uniform(300, 4000))
     # The sea lies mostly beyond the turbine as the camera sees it.
     sea_bearing = cam_heading + float(rng.uniform(-70, 70))
