@@ -201,7 +201,7 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
     usable = fl.usable_battery_s
     first_fwd = _unit(np.r_[(chunks[0].start - launch)[:2], 0.0] + 1e-9)
     wps: list[WP] = [WP(launch.copy(), first_fwd, False, "launch", False)]
-    swaps: list[int] = []  # indices of waypoints after which the battery is swapped
+    swaps: list[int] = []  # indices of the waypoints that end a battery swap on the ground
 
     def link(p: np.ndarray, q: np.ndarray, comp: str, fast: bool, what: str) -> list[WP]:
         gmin = float(site.ground_z(np.array([p, q])).min()) + s.min_altitude_m
@@ -237,6 +237,7 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
                     f"{usable / 60:.1f} min); raise battery_minutes or the speeds")
             if len(wps) > 2:  # not already on a fresh battery at the launch point
                 go_home()
+                wps.append(WP(launch.copy(), None, False, "launch", False))  # battery swap
                 swaps.append(len(wps) - 1)
                 takeoff()
                 sortie = _leg_time(launch, above, v_fast, climb)
@@ -269,7 +270,7 @@ def _timed_route(uav: str, wps: list[WP], swaps: list[int], v_slow: float, v_fas
         v = v_slow if w.slow else v_fast
         dt = _leg_time(pos[i - 1], pos[i], v, climb)
         L = float(np.linalg.norm(pos[i] - pos[i - 1]))
-        t[i] = t[i - 1] + dt + (swap_s if (i - 1) in swap_set else 0.0)
+        t[i] = t[i - 1] + dt + (swap_s if i in swap_set else 0.0)
         speed[i] = L / dt if dt > 0 else 0.0
     return Route(uav, t, pos, speed, yaw, pitch, np.array([w.photo for w in wps]),
                  np.array([w.component for w in wps], dtype=object),

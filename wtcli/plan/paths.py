@@ -100,18 +100,30 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
         return []
     dirs = list(hints or [])
     m = 0.5 * (p + q)
-    for t in site.turbines:
-        if np.linalg.norm(m - t.hub_center) < t.tip_radius + 60:
-            radial = m - t.hub_center
-            radial -= (radial @ t.axis) * t.axis
-            if np.linalg.norm(radial) > 1e-6:
-                dirs.append(_unit(radial))
-            dirs += [t.axis, -t.axis, _unit(t.right + 0.0), -t.right]
-            break
+    for x in (m, p, q):  # escape directions from the turbine nearest each of these points
+        t = min(site.turbines, key=lambda t: float(np.linalg.norm(x - t.hub_center)))
+        radial = x - t.hub_center
+        radial -= (radial @ t.axis) * t.axis
+        if np.linalg.norm(radial) > 1e-6:
+            dirs.append(_unit(radial))
+        out = np.r_[(x - t.base_xyz)[:2], 0.0]
+        if np.linalg.norm(out) > 1e-6:
+            dirs.append(_unit(out))
+        dirs += [t.axis, -t.axis]
+    side = np.cross(Z, q - p)
+    if np.linalg.norm(side) > 1e-6:
+        dirs += [_unit(side), -_unit(side)]
     dirs.append(Z)
+    uniq: list[np.ndarray] = []
+    for u in dirs:
+        if all(float(u @ v) < 0.999 for v in uniq):
+            uniq.append(u)
+    dirs = uniq
     cands: list[list[np.ndarray]] = []
     for dist in (2.0, 4.0, 7.0, 11.0, 16.0, 24.0, 35.0, 50.0):
         cands += [[m + dist * u] for u in dirs]
+        cands += [[p + dist * u] for u in dirs]
+        cands += [[q + dist * u] for u in dirs]
         cands += [[p + dist * u, q + dist * u] for u in dirs]
     legs0, legs1, owner = [], [], []
     for i, vias in enumerate(cands):

@@ -1,0 +1,105 @@
+"""`wtinspect plan`: turbines.yaml + photo / pitch JSON -> flight plan + exports. docs/plan.md"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from wtcli.console import err_console
+from wtcli.errors import ConfigError
+from wtcli.jsonio import dumps
+from wtcli.plan_file import PLAN_SCHEMA, PLAN_VERSION, write_plan
+
+
+def _pose(text: str | None):
+    if text is None:
+        return None
+    from wtcli.plan.config import CameraPose
+
+    try:
+        v = [float(x) for x in text.replace(";", ",").split(",")]
+    except ValueError:
+        v = []
+    if len(v) not in (6, 7):
+        raise ConfigError(f"--camera-pose: expected X,Y,Z,TX,TY,TZ[,ROLL] (ENU m of the camera and "
+                          f"of the point it looked at), got {text!r}")
+    return CameraPose(tuple(v[:3]), tuple(v[3:6]), v[6] if len(v) == 7 else 0.0)
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("plan")
+    def plan(
+        turbines_yaml: Path = typer.Argument(..., metavar="TURBINES_YAML",
+                                             help="Site, turbines, fleet, camera and mission settings "
+                                                  "(docs/turbines-yaml.md)."),
+        inputs: Optional[List[str]] = typer.Argument(
+            None, metavar="[PHOTO_OR_PITCH_JSON...]",
+            help="Blade angles: a photo (segment -> contours -> pitch) or a pitch JSON, per turbine; "
+                 "prefix with ID= to name the turbine (T2=photo.png). Default: each turbine's "
+                 "'photo' key, else its YAML azimuths."),
+        out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write the plan JSON here."),
+        export_dir: Optional[Path] = typer.Option(
+            None, "--export-dir", help="Write QGroundControl .plan and QGC WPL 110 .waypoints per "
+                                       "UAV sortie, and a .geojson (needs site.origin)."),
+        picture: Optional[Path] = typer.Option(None, "--picture",
+                                               help="Write front/side/top views of the path (PNG)."),
+        pattern: str = typer.Option("adaptive", "--pattern",
+                                    help="adaptive (real blade angles) or fixed-y (baseline that "
+                                         "assumes a Y stop; reported, never refused)."),
+        camera_pose: Optional[str] = typer.Option(
+            None, "--camera-pose", metavar="X,Y,Z,TX,TY,TZ[,ROLL]",
+            help="Where the photo was taken from and the point it looked at (ENU m); default: at "
+                 "S_p looking at the rotor centre."),
+        json_out: bool = typer.Option(False, "--json", help="Print the plan JSON on stdout."),
+    ) -> None:
+        """Plan a safe inspection flight around every blade side, the nacelle and the tower."""
+        import cv2
+
+        from wtcli.jsonio import atomic_write_bytes, document
+        from wtcli.plan.angles import blade_azimuths
+        from wtcli.plan.config import load_mission
+        from wtcli.plan.exports import export_all
+        from wtcli.plan.mission import PATTERNS, plan_mission
+        from wtcli.plan.picture import draw_plan
+
+        if pattern not in PATTERNS:
+            raise ConfigError(f"--pattern: expected one of {', '.join(PATTERNS)}, got {pattern!r}")
+        mission = load_mission(turbines_yaml)
+        azimuths, sources = blade_azimuths(mission, list(inputs or []), _pose(camera_pose))
+        for tid, src in sources.items():
+            err_console.print(f"{tid}: blade azimuths "
+                              f"{', '.join(f'{a:.1f}' for a in azimuths[tid])} deg from {src}")
+        result = plan_mission(mission, azimuths=azimuths or None, pattern=pattern)
+        doc = document(PLAN_SCHEMA, PLAN_VERSION, result.to_dict())
+        if out is not None:
+            write_plan(out, result)
+        if export_dir is not None:
+            fl = mission.fleet
+            files = export_all(result, export_dir, stem=(out.stem if out else "mission"),
+                               cruise=fl.cruise_speed_m_s, hover=fl.inspection_speed_m_s)
+            err_console.print(f"exports: {len(files)} file(s) -> {export_dir}")
+        if picture is not None:
+            ok, png = cv2.imencode(".png", draw_plan(result))
+            atomic_write_bytes(picture, png.tobytes())
+        s = result.summary
+        if s.get("notes"):
+            err_console.print(f"note: {len(s['notes'])} adaptation(s) near the hub, nacelle or tower "
+                              "(oblique passes, dropped stations): see summary.notes in the plan")
+        if json_out:
+            typer.echo(dumps(doc))
+            return
+        cov = s["predicted_coverage"]
+        typer.echo(f"pattern {s['pattern']}: {len(result.routes)} UAV route(s), "
+                   f"length {s['total_length_m']:.0f} m, time {s['total_time_s'] / 60:.1f} min, "
+                   f"{s['photos']} photos, min clearance {s['min_clearance_m']:.2f} m "
+                   f"(safe {s['safe_distance_m']:g} m), GSD {s['coverage_gsd_mm']:.2f} mm/px")
+        for tid, c in cov.items():
+            typer.echo(f"{tid}: predicted blade coverage {c['blade_average']:.1%} "
+                       f"(worst side {c['min_side']:.1%}), tower/nacelle {c['structure']:.1%}")
+        v = s["violations"]
+        if any(v.values()):
+            typer.echo(f"UNSAFE against the real turbines: {v} - {s['first_violation']}")
+        if out is not None:
+            err_console.print(f"plan -> {out}")

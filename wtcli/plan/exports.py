@@ -1,0 +1,168 @@
+"""Mission exports of a Plan: QGroundControl ``.plan``, MAVLink ``QGC WPL 110`` and GeoJSON.
+
+Field-level notes: /work/shared/formats.md (mirrored in docs/plan.md). One file per UAV and
+sortie (a battery swap ends a sortie: a mission file is flown on one battery). Waypoints are in
+frame 3 (altitude relative to the launch point, i.e. home); home is the launch point in frame 0
+(AMSL). Commands used:
+
+* 22 NAV_TAKEOFF to the take-off altitude, 16 NAV_WAYPOINT (p2 acceptance radius, p4 yaw = the
+  camera heading, so the vehicle turns to face what the camera looks at), 21 NAV_LAND at home;
+* 178 DO_CHANGE_SPEED (p1 = 1 ground speed, p2 m/s) whenever the planned speed changes;
+* 205 DO_MOUNT_CONTROL (p1 gimbal pitch, p7 = 2 MAVLink targeting) whenever the gimbal pitch
+  changes, placed before the waypoint it is for;
+* 203 DO_DIGICAM_CONTROL (p5 = 1: shoot) after each photo waypoint.
+
+ArduPilot's 196 DO_SET_ROI_WPNEXT_OFFSET is never used.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from wtcli.errors import ConfigError
+from wtcli.jsonio import atomic_write_text
+from wtcli.plan.geodesy import enu_to_geodetic
+from wtcli.plan_file import Plan, Route
+
+ACCEPT_RADIUS_M = 0.5
+FIRMWARE_ARDUPILOT = 3
+VEHICLE_QUAD = 2
+
+
+@dataclass(frozen=True)
+class Item:
+    command: int
+    frame: int
+    params: tuple  # 7 values: p1..p4, then lat, lon, alt (None where unset)
+
+    @property
+    def has_coordinate(self) -> bool:
+        return self.command in (16, 22, 21)
+
+
+def sorties(route: Route) -> list[tuple[int, int]]:
+    """(first, last) waypoint indices of each flight between take-off and landing."""
+    ground = np.isclose(route.pos[:, 2], route.pos[0, 2]) & \
+        (np.linalg.norm(route.pos[:, :2] - route.pos[0, :2], axis=1) < 0.5)
+    g = np.nonzero(ground)[0]
+    return [(int(a), int(b)) for a, b in zip(g[:-1], g[1:]) if b > a + 1]
+
+
+def _require_origin(plan: Plan) -> dict:
+    if not plan.site_origin:
+        raise ConfigError("exports to lat/lon need site.origin (lat, lon, alt) in turbines.yaml")
+    return plan.site_origin
+
+
+def mission_items(plan: Plan, route: Route, first: int, last: int) -> tuple[list[Item], np.ndarray]:
+    """The items of one sortie (without the home row) and home [lat, lon, alt AMSL]."""
+    origin = _require_origin(plan)
+    llh = enu_to_geodetic(route.pos[first:last + 1], origin)
+    home = llh[0]
+    rel = route.pos[first:last + 1, 2] - route.pos[first, 2]
+    items: list[Item] = []
+    speed, pitch = None, None
+    n = last - first + 1
+    for j in range(1, n - 1):  # skip the ground points: take-off and landing are commands
+        i = first + j
+        lat, lon = float(llh[j, 0]), float(llh[j, 1])
+        alt = float(rel[j])
+        yaw = float(route.yaw_deg[i])
+        if j == 1:
+            items.append(Item(22, 3, (0.0, 0.0, 0.0, yaw, lat, lon, alt)))
+            continue
+        v = round(float(route.speed[i]), 1)
+        if v > 0 and v != speed:
+            items.append(Item(178, 2, (1.0, v, -1.0, 0.0, None, None, None)))
+            speed = v
+        g = round(float(route.gimbal_pitch_deg[i]), 1)
+        if g != pitch:
+            items.append(Item(205, 2, (g, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0)))
+            pitch = g
+        items.append(Item(16, 3, (0.0, ACCEPT_RADIUS_M, 0.0, yaw, lat, lon, alt)))
+        if route.photo[i]:
+            items.append(Item(203, 2, (0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0)))
+    items.append(Item(21, 3, (0.0, 0.0, 0.0, float(route.yaw_deg[last]), float(llh[-1, 0]),
+                              float(llh[-1, 1]), 0.0)))
+    return items, home
+
+
+def wpl_text(items: list[Item], home: np.ndarray) -> str:
+    """MAVLink plain-text mission: header, home row 0 (frame 0, AMSL), items from index 1."""
+    lines = ["QGC WPL 110",
+             "\t".join(["0", "1", "0", "16", "0", "0", "0", "0", f"{home[0]:.8f}", f"{home[1]:.8f}",
+                        f"{home[2]:.3f}", "1"])]
+    for k, it in enumerate(items, start=1):
+        p = list(it.params)
+        lat = f"{p[4]:.8f}" if p[4] is not None else "0"
+        lon = f"{p[5]:.8f}" if p[5] is not None else "0"
+        alt = f"{p[6]:.3f}" if p[6] is not None else "0"
+        lines.append("\t".join([str(k), "0", str(it.frame), str(it.command)]
+                               + [f"{float(x):.6g}" for x in p[:4]] + [lat, lon, alt, "1"]))
+    return "\n".join(lines) + "\n"
+
+
+def qgc_plan_dict(items: list[Item], home: np.ndarray, cruise: float, hover: float) -> dict:
+    out = []
+    for k, it in enumerate(items, start=1):
+        params = [None if x is None else (round(float(x), 8)) for x in it.params]
+        d = {"type": "SimpleItem", "command": it.command, "frame": it.frame, "autoContinue": True,
+             "doJumpId": k, "params": params}
+        if it.has_coordinate:
+            d.update({"Altitude": params[6], "AltitudeMode": 1, "AMSLAltAboveTerrain": None})
+        out.append(d)
+    return {"fileType": "Plan", "version": 1, "groundStation": "wtinspect",
+            "mission": {"version": 2, "firmwareType": FIRMWARE_ARDUPILOT, "vehicleType": VEHICLE_QUAD,
+                        "cruiseSpeed": round(cruise, 3), "hoverSpeed": round(hover, 3),
+                        "globalPlanAltitudeMode": 1,
+                        "plannedHomePosition": [round(float(home[0]), 8), round(float(home[1]), 8),
+                                                round(float(home[2]), 3)],
+                        "items": out},
+            "geoFence": {"circles": [], "polygons": [], "version": 2},
+            "rallyPoints": {"points": [], "version": 2}}
+
+
+def geojson_dict(plan: Plan) -> dict:
+    """RFC 7946 FeatureCollection: turbines (points), each route (line) and its photo points;
+    coordinates [lon, lat, alt AMSL]."""
+    origin = _require_origin(plan)
+    feats = []
+    for t in plan.turbines:
+        ll = enu_to_geodetic(t.base_xyz[None], origin)[0]
+        feats.append({"type": "Feature", "geometry": {"type": "Point", "coordinates":
+                      [round(float(ll[1]), 8), round(float(ll[0]), 8), round(float(ll[2]), 3)]},
+                      "properties": {"kind": "turbine", "id": t.id, "hub_height_m": t.hub_height,
+                                     "rotor_diameter_m": t.rotor_diameter, "yaw_deg": t.yaw_deg}})
+    for r in plan.routes:
+        ll = enu_to_geodetic(r.pos, origin)
+        coords = [[round(float(p[1]), 8), round(float(p[0]), 8), round(float(p[2]), 3)] for p in ll]
+        feats.append({"type": "Feature", "geometry": {"type": "LineString", "coordinates": coords},
+                      "properties": {"kind": "route", "uav": r.uav, "length_m": round(r.length_m, 2),
+                                     "time_s": round(r.duration_s, 2), "photos": int(r.photo.sum())}})
+        photos = [c for c, f in zip(coords, r.photo) if f]
+        if photos:
+            feats.append({"type": "Feature", "geometry": {"type": "MultiPoint", "coordinates": photos},
+                          "properties": {"kind": "photos", "uav": r.uav}})
+    return {"type": "FeatureCollection", "features": feats}
+
+
+def export_all(plan: Plan, out_dir: str | Path, stem: str = "mission", cruise: float = 8.0,
+               hover: float = 2.0) -> list[Path]:
+    """Write ``STEM_UAV_sN.plan`` and ``.waypoints`` per UAV sortie and ``STEM.geojson``."""
+    _require_origin(plan)
+    out_dir = Path(out_dir)
+    written = []
+    for r in plan.routes:
+        for s, (a, b) in enumerate(sorties(r), start=1):
+            items, home = mission_items(plan, r, a, b)
+            base = out_dir / f"{stem}_{r.uav}_s{s}"
+            written.append(atomic_write_text(base.with_suffix(".waypoints"), wpl_text(items, home)))
+            written.append(atomic_write_text(base.with_suffix(".plan"), json.dumps(
+                qgc_plan_dict(items, home, cruise, hover), indent=1, allow_nan=False)))
+    written.append(atomic_write_text(out_dir / f"{stem}.geojson",
+                                     json.dumps(geojson_dict(plan), allow_nan=False)))
+    return written
