@@ -231,6 +231,7 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
     hist = []  # true positions, for the pilot's delayed view
     tx = ty = tz = 0.0
     wx = wy = wz = 0.0
+    lost2 = ctl.divergence_m ** 2
 
     for k in range(n):
         rx, ry, rz = R[k]
@@ -332,10 +333,17 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
         out_w.append((wx, wy, wz))
         out_y.append(yaw)
         out_g.append(pit)
-        if k % 50 == 0 and not (abs(px) + abs(py) + abs(pz) < DIVERGED_M):
-            raise SimulationError(
-                f"flight diverged at t={ref.t[k]:.1f} s ({mode} controller): position "
-                f"({px:.3g}, {py:.3g}, {pz:.3g}); check the gains and limits of the scenario")
+        if k % 25 == 0:
+            if not (abs(px) + abs(py) + abs(pz) < DIVERGED_M):
+                raise SimulationError(
+                    f"flight diverged at t={ref.t[k]:.1f} s ({mode} controller): position "
+                    f"({px:.3g}, {py:.3g}, {pz:.3g}); check the gains and limits of the scenario")
+            if mode == "pid" and (px - rx) ** 2 + (py - ry) ** 2 + (pz - rz) ** 2 > lost2:
+                raise SimulationError(
+                    f"flight diverged at t={ref.t[k]:.1f} s: the vehicle is "
+                    f"{math.sqrt((px - rx) ** 2 + (py - ry) ** 2 + (pz - rz) ** 2):.0f} m from its "
+                    f"set-point (more than control.divergence_m = {ctl.divergence_m:g}); the wind "
+                    "may exceed what the vehicle can hold, or the gains are unstable")
     pos = np.array(out_p)
     if not np.isfinite(pos).all() or np.abs(pos).max() >= DIVERGED_M:
         bad = int(np.argmax(~np.isfinite(pos).all(1) | (np.abs(pos).max(1) >= DIVERGED_M)))

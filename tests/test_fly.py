@@ -1,0 +1,280 @@
+"""The flight simulator: determinism, tracking, wind rejection, safety checks, failure modes, CLI.
+
+Plans are built in code (a straight line, a pass along an upright blade) so these tests only
+depend on the plan file's types, not on the planner.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from wtcli.errors import ConfigError, SimulationError
+from wtcli.fly.flight import fly_plan, path_deviation, turbine_clearance
+from wtcli.fly.scenario import default_scenario, load_scenario, shipped_scenarios
+from wtcli.fly.sim import fly, make_reference
+from wtcli.fly.wind import dryden_params, dryden_series, gust_series, make_wind
+from wtcli.geometry import Camera, Turbine
+from wtcli.plan_file import Plan, Route, write_plan
+
+CAM = Camera(5456, 3632, 16, 23.2)
+
+
+def turbine(**kw) -> Turbine:
+    base = dict(id="T1", base=(0, 0, 0), hub_height=60, rotor_diameter=60, yaw_deg=0)
+    base.update(kw)
+    return Turbine.with_rotor_azimuth(90, **base)  # blade 1 straight up, rotor facing north
+
+
+def route_through(points, speed=2.0, yaw=180.0, pitch=0.0, photo=None, component="T1/blade1",
+                  uav="UAV1") -> Route:
+    pts = np.asarray(points, float)
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    t = np.r_[0.0, np.cumsum(seg / speed)]
+    m = len(pts)
+    return Route(uav=uav, t=t, pos=pts, speed=np.full(m, speed), yaw_deg=np.full(m, yaw),
+                 gimbal_pitch_deg=np.full(m, pitch),
+                 photo=np.zeros(m, bool) if photo is None else np.asarray(photo, bool),
+                 component=np.full(m, component, dtype=object))
+
+
+def line_plan(length=120.0, z=50.0, y=60.0, speed=3.0, step=10.0) -> Plan:
+    """A straight east-west line well away from the turbine (no photos of interest)."""
+    x = np.arange(-length / 2, length / 2 + 1e-9, step)
+    pts = np.stack([x, np.full_like(x, y), np.full_like(x, z)], 1)
+    return Plan([turbine()], CAM, [route_through(pts, speed)], safe_distance_m=3.0,
+                target_gsd_mm=1.5)
+
+
+def blade_pass_plan(distance=5.5, speed=1.5, safe=3.0) -> Plan:
+    """Up the front of the upright blade at ``distance`` from its axis, photos every 2 m."""
+    t = turbine()
+    hub = t.hub_center
+    z = np.arange(hub[2] + 4, hub[2] + t.tip_radius, 2.0)
+    y = hub[1] + distance
+    pts = np.stack([np.full_like(z, hub[0]), np.full_like(z, y), z], 1)
+    return Plan([t], CAM, [route_through(pts, speed, photo=np.ones(len(z), bool),
+                                         component="T1/blade1/leading_edge")],
+                safe_distance_m=safe, target_gsd_mm=1.5)
+
+
+QUIET = dict(vehicle={"position_noise_m": 0.0, "velocity_noise_ms": 0.0})
+
+
+# ---- scenario ----------------------------------------------------------------------------------
+
+def test_shipped_scenarios_load_and_name_their_missions():
+    shipped = shipped_scenarios()
+    assert {"paper-s1", "paper-s2", "paper-s3", "paper-s4", "tiny"} <= set(shipped)
+    for name, path in shipped.items():
+        s = load_scenario(path)
+        assert s.mission is not None and s.mission.exists(), name
+        if name.startswith("paper-"):
+            assert s.paper["manual"]["time_min"] > s.paper["automated"]["time_min"]
+    s2 = load_scenario(shipped["paper-s2"])
+    assert s2.terrain.kind == "hilly" and 8 <= s2.wind.speed_ms <= 12
+
+
+def test_scenario_unknown_key_gets_a_hint(tmp_path):
+    p = tmp_path / "s.yaml"
+    p.write_text("wind:\n  sped_ms: 3\n")
+    with pytest.raises(ConfigError, match=r"did you mean 'speed_ms'"):
+        load_scenario(p)
+
+
+def test_scenario_value_out_of_range_names_key_and_range(tmp_path):
+    p = tmp_path / "s.yaml"
+    p.write_text("vehicle:\n  max_tilt_deg: 80\n")
+    with pytest.raises(ConfigError, match=r"vehicle.max_tilt_deg: expected a number in \[5, 60\]"):
+        load_scenario(p)
+    p.write_text("terrain: {kind: hily}\n")
+    with pytest.raises(ConfigError, match="did you mean 'hilly'"):
+        load_scenario(p)
+
+
+# ---- wind --------------------------------------------------------------------------------------
+
+def test_dryden_series_has_the_model_variance_and_is_seeded():
+    scn = default_scenario(wind={"speed_ms": 10, "reference_height_m": 100,
+                                 "turbulence": {"intensity": "moderate"}})
+    p = dryden_params(scn.wind, 100.0)
+    # MIL-HDBK-1797 low altitude: sigma_w = 0.1 W20 (moderate: 30 kt), sigma_u = sigma_w / k^0.4.
+    assert p.sigma_w == pytest.approx(0.1 * 30 * 0.514444, rel=1e-6)
+    h = 100 / 0.3048
+    assert p.sigma_u == pytest.approx(p.sigma_w / (0.177 + 0.000823 * h) ** 0.4, rel=1e-6)
+    assert p.L_w == pytest.approx(100.0)
+    a = dryden_series(p, 400_000, 0.05, np.random.default_rng(3))
+    b = dryden_series(p, 400_000, 0.05, np.random.default_rng(3))
+    assert np.array_equal(a, b)
+    assert a.std(0) == pytest.approx([p.sigma_u, p.sigma_v, p.sigma_w], rel=0.15)
+
+
+def test_one_minus_cosine_gust_peaks_at_its_amplitude():
+    scn = default_scenario(wind={"gusts": {"rate_per_min": 1, "amplitude_ms": 3, "duration_s": 4}})
+    g, gusts = gust_series(scn.wind, 60_000, 0.01, np.random.default_rng(0))
+    assert gusts and g.min() >= 0
+    t0 = gusts[0][0]
+    assert gusts[1][0] > t0 + 4  # the first gust stands alone
+    k0 = int(math.ceil(t0 / 0.01))
+    assert g[k0 + 200] == pytest.approx(3.0, abs=1e-3)  # peak in the middle
+    assert g[k0] < 0.01 and g[k0 + 400] < 0.01  # 1-cosine: zero at both ends
+
+
+# ---- flying ------------------------------------------------------------------------------------
+
+def test_same_seed_same_flight_other_seed_other_flight():
+    plan = blade_pass_plan()
+    scn = default_scenario(wind={"speed_ms": 8, "reference_height_m": 60,
+                                 "turbulence": {"intensity": "moderate"},
+                                 "gusts": {"rate_per_min": 2, "amplitude_ms": 2}})
+    a = fly_plan(plan, scn).automated
+    b = fly_plan(plan, scn).automated
+    c = fly_plan(plan, scn.with_seed(1)).automated
+    assert np.array_equal(a.uavs[0].track.pos, b.uavs[0].track.pos)
+    assert a.to_dict() == b.to_dict()
+    assert not np.allclose(a.uavs[0].track.pos, c.uavs[0].track.pos)
+
+
+def test_straight_line_without_wind_tracks_within_centimetres():
+    rep = fly_plan(line_plan(), default_scenario(**QUIET))
+    f = rep.automated
+    assert f.deviation.max() < 0.03
+    assert f.deviation.mean() < 0.01
+    assert f.path_length_m == pytest.approx(120.0, abs=0.5)
+
+
+def test_pid_beats_feedforward_in_steady_wind():
+    scn = default_scenario(wind={"speed_ms": 8, "reference_height_m": 50, "direction_deg": 0,
+                                 "turbulence": {"model": "none"}}, **QUIET)
+    rep = fly_plan(line_plan(), scn, baselines=True)
+    pid, ff = rep.automated, rep.flights["no_compensation"]
+    assert pid.deviation.mean() < 0.15
+    assert ff.deviation.mean() > 10 * pid.deviation.mean()
+    assert ff.deviation.mean() > 2.0
+
+
+def test_strong_turbulent_wind_blade_pass_stays_close_and_covers_the_blade():
+    plan = blade_pass_plan()
+    scn = default_scenario(wind={"speed_ms": 10, "reference_height_m": 60, "direction_deg": 180,
+                                 "turbulence": {"intensity": "moderate"},
+                                 "gusts": {"rate_per_min": 2, "amplitude_ms": 2}})
+    f = fly_plan(plan, scn).automated
+    assert f.deviation.mean() < 0.5
+    assert f.min_clearance_m > plan.safe_distance_m and not f.violations
+    le = f.coverage["T1"].by_blade_side()["blade1"]["leading_edge"]
+    assert le > 0.9  # the pass looks straight at blade 1's leading edge (feathered: faces front)
+
+
+def test_clearance_violation_is_detected_when_forced():
+    plan = blade_pass_plan(distance=2.0, safe=3.0)  # planned inside the safe distance
+    f = fly_plan(plan, default_scenario(**QUIET)).automated
+    assert f.violations and f.violations[0].kind == "clearance"
+    assert f.violations[0].worst_m < 3.0 and f.violations[0].what == "T1/blade1"
+    assert f.min_clearance_m == pytest.approx(f.violations[0].worst_m)
+
+
+def test_clearance_is_vectorised_and_matches_the_turbine_model():
+    t = turbine()
+    rng = np.random.default_rng(0)
+    P = t.hub_center + rng.normal(size=(500, 3)) * 40
+    c, part = turbine_clearance([t], P, near_m=1e9)
+    assert np.allclose(c, t.clearance(P))
+    c2, _ = turbine_clearance([t], P)  # culled: exact near, lower bound far
+    near = c < 30
+    assert np.allclose(c2[near], c[near]) and (c2 <= c + 1e-9).all()
+
+
+def test_path_deviation_of_known_offsets():
+    path = np.array([[0, 0, 0], [10, 0, 0], [10, 10, 0]], float)
+    pos = np.array([[5, 1, 0], [11, 5, 0], [10, 12, 0]], float)
+    d = path_deviation(path, np.array([0, 1, 1]), pos)
+    assert d == pytest.approx([1, 1, 2])
+
+
+def test_wind_beyond_the_vehicle_fails_loudly():
+    scn = default_scenario(wind={"speed_ms": 40, "reference_height_m": 50,
+                                 "turbulence": {"model": "none"}})
+    with pytest.raises(SimulationError, match="diverged"):
+        fly_plan(line_plan(), scn)
+
+
+def test_non_finite_state_fails_loudly_not_nan():
+    plan = line_plan()
+    scn = default_scenario()
+    r = plan.routes[0]
+    ref = make_reference(r.t, r.pos, r.yaw_deg, r.gimbal_pitch_deg, 0.02, 0.3)
+    wind = make_wind(scn.wind, 1.0, len(ref.t) * 2, 0.01, 50, np.random.default_rng(0))
+    extra = wind.extra.copy()
+    extra[1000:] = np.nan
+    from dataclasses import replace
+    with pytest.raises(SimulationError, match="diverged"):
+        fly(ref, scn, replace(wind, extra=extra), np.zeros(len(ref.t)), "pid",
+            np.random.default_rng(0))
+
+
+def test_manual_pilot_is_slower_and_less_precise():
+    plan = blade_pass_plan()
+    scn = default_scenario(wind={"speed_ms": 5, "reference_height_m": 60})
+    rep = fly_plan(plan, scn, baselines=True)
+    auto, man = rep.automated, rep.flights["manual"]
+    assert man.time_s > 2 * auto.time_s
+    assert man.deviation.mean() > 3 * auto.deviation.mean()
+    assert man.photos == auto.photos
+
+
+def test_report_json_is_clean_and_has_the_schema(tmp_path, cli):
+    plan_path = tmp_path / "plan.json"
+    write_plan(plan_path, blade_pass_plan())
+    scn = tmp_path / "s.yaml"
+    scn.write_text("wind: {speed_ms: 6, reference_height_m: 60}\nbaselines: {fixed_pattern: false}\n")
+    res = cli("fly", plan_path, "--scenario", scn, "--json", "--baselines",
+              "--pictures", tmp_path / "pics", "--out", tmp_path / "r.json")
+    assert res.exit_code == 0, res.stderr
+    doc = json.loads(res.stdout)
+    assert doc["schema"] == "wtinspect.flight" and doc["schema_version"] == 1
+    assert set(doc["flights"]) == {"automated", "no_compensation", "manual"}
+    a = doc["flights"]["automated"]
+    for key in ("time_s", "path_length_m", "deviation_m", "clearance", "coverage", "photos",
+                "battery"):
+        assert key in a
+    assert json.loads((tmp_path / "r.json").read_text()) == doc
+    assert "NaN" not in res.stdout and "Infinity" not in res.stdout
+    for name in ("path.png", "deviation.png", "coverage.png"):
+        assert (tmp_path / "pics" / name).stat().st_size > 1000
+
+
+def test_cli_fail_on_violation_exits_8(tmp_path, cli):
+    plan_path = tmp_path / "plan.json"
+    write_plan(plan_path, blade_pass_plan(distance=2.0))
+    res = cli("fly", plan_path, "--scenario", "tiny", "--fail-on-violation")
+    assert res.exit_code == 8
+    assert "clearance" in res.stderr
+    res = cli("fly", plan_path, "--scenario", "tiny")
+    assert res.exit_code == 0
+
+
+def test_cli_needs_a_scenario(cli, tmp_path):
+    res = cli("fly")
+    assert res.exit_code == 2
+    res = cli("fly", "--scenario", tmp_path / "missing.yaml")
+    assert res.exit_code == 4
+
+
+@pytest.mark.slow
+def test_sim_speed_twenty_minutes_under_two_seconds():
+    import time
+
+    # A 20-minute pass pattern: up and down a 60 m line at 2 m/s, with photos.
+    z = np.r_[np.linspace(10, 70, 31), np.linspace(70, 10, 31)[1:]]
+    pts = np.stack([np.zeros_like(z), np.full_like(z, 40.0), z], 1)
+    pts = np.concatenate([pts] * 10)
+    plan = Plan([turbine()], CAM, [route_through(pts, 1.0, photo=np.ones(len(pts), bool))], 3.0, 1.5)
+    assert plan.routes[0].duration_s >= 1200 - 60
+    scn = default_scenario(wind={"speed_ms": 10, "reference_height_m": 60,
+                                 "turbulence": {"intensity": "moderate"}})
+    t0 = time.perf_counter()
+    fly_plan(plan, scn)
+    assert time.perf_counter() - t0 < 2.0 * 1.5  # 1.5x headroom for a busy CI machine
