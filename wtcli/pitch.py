@@ -699,7 +699,7 @@ def draw_pitch_overlay(image_bgr: np.ndarray | None, result: PitchResult) -> np.
             raise ValueError(f"expected an image of {w}x{h}, got {img.shape[1]}x{img.shape[0]}")
     s = max(h, w) / 1000.0
     thick = max(1, round(2 * s))
-    scale = max(0.4, 0.6 * s)
+    scale = max(0.45, 0.6 * s)
     blades_contours = {}
     if result.contours is not None:
         blades_contours = {i.source_index: i for i in result.contours.of("blade")}
@@ -717,20 +717,22 @@ def draw_pitch_overlay(image_bgr: np.ndarray | None, result: PitchResult) -> np.
         length = max(1.0, math.dist(root, tip))
         cv2.arrowedLine(img, root, tip, color, thick + 1, cv2.LINE_AA,
                         tipLength=min(0.2, 30 * s / length))
-        label = f"#{k + 1} theta {b.theta_deg:.1f} {b.theta_class} phi {b.phi_deg:.1f}"
-        # Beside the blade at 60 % of its length, on its right-hand side.
-        r0, r1 = np.asarray(b.root_px), np.asarray(b.tip_px)
-        along = (r1 - r0) / length
-        anchor = r0 + 0.6 * (r1 - r0) + np.array([-along[1], along[0]]) * 18 * max(s, 0.7)
-        (tw, th), _ = cv2.getTextSize(label, cv2.FONT_HERSHEY_SIMPLEX, scale, thick)
-        if anchor[0] < r0[0] + 0.6 * (r1 - r0)[0]:
-            anchor[0] -= tw  # text on the left of the blade ends at the anchor
-        x = int(np.clip(anchor[0], 2, max(2, w - tw - 2)))
+        # "#k" just beyond the tip; the numbers go in the table at the top left.
+        tag = f"#{k + 1}"
+        (tw, th), _ = cv2.getTextSize(tag, cv2.FONT_HERSHEY_SIMPLEX, scale, thick)
+        along = (np.asarray(b.tip_px) - np.asarray(b.root_px)) / length
+        anchor = np.asarray(b.tip_px) + along * (8 + tw) * max(s, 0.7)
+        x = int(np.clip(anchor[0] - tw / 2, 2, max(2, w - tw - 2)))
         y = int(np.clip(anchor[1] + th / 2, th + 2, h - 4))
-        _text(img, label, (x, y), scale, color, thick)
+        _text(img, tag, (x, y), scale, color, thick)
     hub = tuple(int(round(v)) for v in result.hub_px)
     cv2.circle(img, hub, max(3, round(6 * s)), (40, 40, 255), -1, cv2.LINE_AA)
     cv2.circle(img, hub, max(3, round(6 * s)), (255, 255, 255), 1, cv2.LINE_AA)
+    step = int(24 * max(s, 0.7))
+    for k, b in enumerate(result.blades):
+        _text(img, f"#{k + 1}  theta {b.theta_deg:5.1f}  {b.theta_class:<10}  phi {b.phi_deg:5.1f}"
+                   f"  (eq. 7: {b.theta_eq7_deg:5.1f})", (8, step * (k + 1)), scale,
+              CLASS_COLORS_BGR[b.theta_class], thick)
     # Legend: the classes and the angle convention.
     step = int(24 * max(s, 0.7))
     y = h - 4 * step + step // 2
