@@ -411,3 +411,14 @@ def test_cli_bad_inputs(cli, tmp_path):
     cv2.imwrite(str(tmp_path / "wrong_size.png"), np.zeros((10, 10, 3), np.uint8))
     one_line_error(cli("pitch", ok, "--overlay-dir", tmp_path / "ov", "--image",
                        tmp_path / "wrong_size.png"), 3, "does not match the masks")
+
+
+def test_cli_contours_file_threshold_can_rise_not_fall(cli, tmp_path):
+    inst = write_rotor_instances(tmp_path / "instances.json", [[10, 130, 250]])
+    assert cli("contours", inst, "--area-threshold", "50", "--out", tmp_path / "c.json").exit_code == 0
+    r = cli("pitch", tmp_path / "c.json", "--area-threshold", "10")
+    one_line_error(r, 4, "filtered at 50 px")
+    r = cli("pitch", tmp_path / "c.json", "--area-threshold", "100", "--json")
+    assert r.exit_code == 0 and json.loads(r.stdout)["images"][0]["area_threshold"] == 100
+    one_line_error(cli("pitch", tmp_path / "c.json", "--area-threshold", "1e6"), 5,
+                   "no contour above the area threshold")

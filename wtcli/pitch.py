@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import cv2
 import numpy as np
@@ -628,20 +628,24 @@ class PitchBatch:
 
 
 def pitch_batch(inputs: list[PitchInput], expected_blades: int | None = 3,
-                source: str = "") -> PitchBatch:
-    """``measure_pitch`` on every input image; per-image errors are recorded, not raised."""
+                source: str = "", on_done: Callable[[int, str | None], None] | None = None
+                ) -> PitchBatch:
+    """``measure_pitch`` on every input image; per-image errors are recorded, not raised.
+    ``on_done(index, error)`` is called after each image (for a progress bar)."""
     results, errors = [], []
-    for inp in inputs:
+    for k, inp in enumerate(inputs):
         if inp.contours is None:
             results.append(None)
             errors.append(inp.error or "no contours")
-            continue
-        try:
-            results.append(measure_pitch(inp.contours, expected_blades))
-            errors.append(None)
-        except PerceptionError as e:
-            results.append(None)
-            errors.append(str(e))
+        else:
+            try:
+                results.append(measure_pitch(inp.contours, expected_blades))
+                errors.append(None)
+            except PerceptionError as e:
+                results.append(None)
+                errors.append(str(e))
+        if on_done is not None:
+            on_done(k, errors[-1])
     return PitchBatch(tuple(results), tuple(errors), tuple(inputs), source, expected_blades)
 
 

@@ -8,7 +8,7 @@ from typing import List, Optional
 import cv2
 import typer
 
-from wtcli.console import err_console
+from wtcli.console import err_console, make_progress
 from wtcli.errors import InputError, PartialFailure, PerceptionError
 from wtcli.jsonio import atomic_write_bytes, dumps, write_json
 from wtcli.pitch import (draw_pitch_overlay, load_pitch_input, overlay_background, pitch_batch)
@@ -44,7 +44,14 @@ def register(app: typer.Typer) -> None:
         loaded = load_pitch_input(inputs, area_threshold)
         if image is not None and len(loaded) != 1:
             raise InputError(f"--image needs an input with one image, got {len(loaded)}")
-        batch = pitch_batch(loaded, blades or None, source=str(inputs[0]))
+        if len(loaded) > 1:
+            with make_progress(transient=True) as progress:
+                task = progress.add_task("pitch", total=len(loaded), status="")
+                batch = pitch_batch(loaded, blades or None, source=str(inputs[0]),
+                                    on_done=lambda k, err: progress.update(
+                                        task, advance=1, status="" if err is None else "failed"))
+        else:
+            batch = pitch_batch(loaded, blades or None, source=str(inputs[0]))
         overlays: list[Optional[str]] | None = None
         if overlay_dir is not None:
             overlays = []
