@@ -269,6 +269,25 @@ def test_the_main_rotor_is_picked_among_several_turbines(with_nacelles):
         pitch_from_instances(four)
 
 
+def test_a_far_rotor_right_behind_the_hub():
+    """Its blades meet at the same image point: told apart by length when clearly shorter."""
+    h = w = 400
+    main = rotor(h, w, [10, 130, 250], 12, length=170, nacelle=True)
+    far = rotor(h, w, [60, 180, 300], 6, length=110, nacelle=False)
+    inst = Instances(np.concatenate([main.labels, far.labels]),
+                     np.concatenate([main.masks, far.masks]))
+    res = pitch_from_instances(inst)
+    assert sorted(round(p) for p in res.phis) == [10, 130, 250]
+    assert sorted(res.other_rotor_blades) == [4, 5, 6]
+    with pytest.raises(PerceptionError, match="found 6 blades"):  # any count: all six
+        measure_pitch(find_contours(inst, 20), 5)
+    same = rotor(h, w, [60, 180, 300], 12, length=160, nacelle=False)  # not clearly shorter
+    inst = Instances(np.concatenate([main.labels, same.labels]),
+                     np.concatenate([main.masks, same.masks]))
+    with pytest.raises(PerceptionError, match="found 6 blades"):
+        pitch_from_instances(inst)
+
+
 def test_two_opposite_blades_without_nacelle_use_their_common_end():
     cs = find_contours(rotor(240, 240, [30, 210], 12, length=100, nacelle=False), 50)
     res = measure_pitch(cs, 2)

@@ -328,6 +328,17 @@ def select_rotor(blades: ContourSet, axes: list[Axis],
     return best, best_c
 
 
+def _longest_if_clearly(keep: list[int], axes: list[Axis], n: int) -> list[int]:
+    """Too many blades on one hub: a far turbine right behind it shows shorter blades. Keep the
+    ``n`` longest when each is at least 1.25x as long as every other; else keep all (and the
+    count check reports them)."""
+    by_length = sorted(keep, key=lambda k: axes[k].t_max - axes[k].t_min, reverse=True)
+    length = [axes[k].t_max - axes[k].t_min for k in by_length]
+    if length[n - 1] >= 1.25 * length[n]:
+        return sorted(by_length[:n])
+    return keep
+
+
 # ---- typed result --------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class BladePitch:
@@ -454,6 +465,8 @@ def measure_pitch(contours: ContourSet, expected_blades: int | None = 3) -> Pitc
     all_axes = [principal_axis(b) for b in all_blades]
     nacelles = contours.of("nacelle")
     keep, candidate = select_rotor(all_blades, all_axes, [_region_centroid(n) for n in nacelles])
+    if expected_blades and len(keep) > expected_blades:
+        keep = _longest_if_clearly(keep, all_axes, expected_blades)
     blades = all_blades[keep]
     others = tuple(all_blades.instances[i].source_index for i in range(len(all_blades))
                    if i not in keep)
