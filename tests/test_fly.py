@@ -275,6 +275,6 @@ def test_sim_speed_twenty_minutes_under_two_seconds():
     assert plan.routes[0].duration_s >= 1200 - 60
     scn = default_scenario(wind={"speed_ms": 10, "reference_height_m": 60,
                                  "turbulence": {"intensity": "moderate"}})
-    t0 = time.perf_counter()
+    t0 = time.process_time()  # CPU time: robust to other jobs sharing the machine
     fly_plan(plan, scn)
-    assert time.perf_counter() - t0 < 2.0 * 1.5  # 1.5x headroom for a busy CI machine
+    assert time.process_time() - t0 < 2.0

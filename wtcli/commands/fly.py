@@ -19,10 +19,16 @@ LABELS = {"time_min": "time (min)", "length_m": "length (m)", "coverage_pct": "c
           "deviation_m": "deviation (m)"}
 
 
+def _console() -> Console:
+    """stdout for people: at least 150 columns wide, so the tables stay tables in files/pipes."""
+    c = Console(highlight=False)
+    return c if c.width >= 150 else Console(highlight=False, width=150)
+
+
 def _flight_table(report) -> Table:
     tab = Table(title=f"flight: {report.scenario.name} (seed {report.scenario.seed})")
     for col in ("flight", "time min", "length m", "coverage %", "deviation m mean/rms/max",
-                "min clearance m", "violations", "photos", "GSD mm (median)", "battery %"):
+                "clearance m", "violations", "photos", "GSD mm", "battery %"):
         tab.add_column(col, justify="left" if col == "flight" else "right")
     for kind, f in report.flights.items():
         d = f.to_dict()
@@ -49,7 +55,7 @@ def _paper_table(rows, means) -> Table:
             tab.add_row(r.name if i == 0 else "", LABELS[m],
                         f"{r.paper['manual'][m]:g}", f"{r.paper['automated'][m]:g}",
                         f"{r.change('paper', m):+.0f}{unit}",
-                        f"{r.ours['manual'][m]:.3g}", f"{r.ours['automated'][m]:.3g}",
+                        _fmt(m, r.ours['manual'][m]), _fmt(m, r.ours['automated'][m]),
                         f"{r.change('ours', m):+.0f}{unit}", end_section=i == len(LABELS) - 1)
     from wtcli.fly.run import PAPER_STATED
     for i, m in enumerate(LABELS):
@@ -58,6 +64,11 @@ def _paper_table(rows, means) -> Table:
                     f"{means['paper'][m]:+.0f}{unit} (stated {PAPER_STATED[m]:+.0f})", "", "",
                     f"{means['ours'][m]:+.0f}{unit}")
     return tab
+
+
+def _fmt(metric: str, v: float) -> str:
+    return {"time_min": f"{v:.1f}", "length_m": f"{v:.0f}", "coverage_pct": f"{v:.1f}",
+            "deviation_m": f"{v:.2f}"}[metric]
 
 
 def register(app: typer.Typer) -> None:
@@ -102,7 +113,7 @@ def register(app: typer.Typer) -> None:
             if json_out:
                 typer.echo(dumps(doc))
             else:
-                Console(highlight=False).print(_paper_table(rows, means))
+                _console().print(_paper_table(rows, means))
             return
         if scenario is None:
             raise typer.BadParameter("give --scenario YAML (or --paper-table)",
@@ -126,7 +137,7 @@ def register(app: typer.Typer) -> None:
         if json_out:
             typer.echo(dumps(doc))
         else:
-            Console(highlight=False).print(_flight_table(report))
+            _console().print(_flight_table(report))
         for note in report.notes:
             err_console.print(f"note: {note}")
         viol = report.automated.violations

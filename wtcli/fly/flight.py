@@ -363,6 +363,12 @@ def measure(kind: str, controller: str, plan: Plan, flights: list[UavFlight], sc
         pcov = _coverage(plan, cam, np.concatenate(pp), np.array(pr).reshape(-1, 3, 3), scn)
     gsd = cam.gsd_mm(turbine_clearance(plan.turbines, ppos)[0]) if len(ppos) else np.zeros(0)
     energy = {f.uav: _energy_wh(f.track, scn) for f in flights}
+    notes = list(notes or [])
+    for uav, e in energy.items():
+        if e > scn.vehicle.battery_wh:
+            notes.append(f"{uav} used {100 * e / scn.vehicle.battery_wh:.0f} % of one battery: "
+                         f"{math.ceil(e / scn.vehicle.battery_wh) - 1} battery swap(s) needed "
+                         "(not simulated; the flight goes on without the landing)")
     return FlightResult(
         kind=kind, controller=controller, uavs=flights, turbines=list(plan.turbines), camera=cam,
         safe_distance_m=plan.safe_distance_m, target_gsd_mm=plan.target_gsd_mm,
@@ -370,7 +376,7 @@ def measure(kind: str, controller: str, plan: Plan, flights: list[UavFlight], sc
         deviation=np.concatenate(devs), tracking_error=np.concatenate(trks), clearance=clearance,
         agl=agl, violations=violations, coverage=coverage, planned_coverage=pcov,
         photo_gsd_mm=np.asarray(gsd, float), energy_wh=energy, battery_wh=scn.vehicle.battery_wh,
-        notes=list(notes or []))
+        notes=notes)
 
 
 def _split_by(labels: np.ndarray, a: int, b: int) -> list[tuple[int, int]]:
