@@ -36,7 +36,8 @@ class _Axes:
     """Maps data (x, y) to pixels inside a box, y up; draws a frame and ticks."""
 
     def __init__(self, img: np.ndarray, box: tuple[int, int, int, int], xlim, ylim,
-                 equal: bool = False, title: str = "", xlabel: str = "", ylabel: str = ""):
+                 equal: bool = False, title: str = "", xlabel: str = "", ylabel: str = "",
+                 xticks: bool = True):
         self.img, (self.x0, self.y0, self.x1, self.y1) = img, box
         (a, b), (c, d) = xlim, ylim
         if b - a < 1e-9:
@@ -55,7 +56,7 @@ class _Axes:
         cv2.putText(img, title, (self.x0, self.y0 - 10), FONT, 0.55, INK, 1, cv2.LINE_AA)
         cv2.putText(img, xlabel, ((self.x0 + self.x1) // 2 - 20, self.y1 + 38), FONT, 0.45, INK, 1,
                     cv2.LINE_AA)
-        for v in _ticks(a, b):
+        for v in (_ticks(a, b) if xticks else []):
             px = self.px(np.array([[v, c]]))[0][0]
             cv2.line(img, (px, self.y1), (px, self.y1 + 5), INK, 1)
             cv2.putText(img, f"{v:g}", (px - 12, self.y1 + 20), FONT, 0.4, INK, 1, cv2.LINE_AA)
@@ -166,7 +167,8 @@ def coverage_picture(report: FlightReport) -> np.ndarray:
     w = max(900, 60 + len(labels) * (8 * len(kinds) + 12))
     img = np.full((460, w, 3), 255, np.uint8)
     ax = _Axes(img, (60, 50, w - 20, 330), (0, len(labels)), (0, 100),
-               title="coverage per blade side, % (sides: leading edge, pressure, trailing edge, suction)")
+               title="coverage per blade side, % (sides: leading edge, pressure, trailing edge, suction)",
+               xticks=False)
     for i, lab in enumerate(labels):
         for j, k in enumerate(kinds):
             x0 = ax.px(np.array([[i + 0.1 + 0.8 * j / len(kinds), 0]]))[0]
