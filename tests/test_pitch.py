@@ -205,6 +205,17 @@ def test_blades_cut_by_the_image_border(hub, tol):
     assert res.image_size == (h, w)
 
 
+def test_a_stub_cut_by_the_frame_follows_the_hub():
+    # The upper blade shows only ~22 px of its root: no axis of its own (elongation < 3).
+    h = w = 300
+    inst = rotor(h, w, [80, 200, 320], 14, hub=(150, 30), length=200, start=8)
+    res = pitch_from_instances(inst)
+    stub = next(b for b in res.blades if b.source_index == 0)
+    assert stub.elongation < 3 and stub.theta_method == "hub_to_centroid"
+    assert err(stub.phi_deg, 80, 360) < 6
+    assert all(b.theta_method == "principal_axis" for b in res.blades if b is not stub)
+
+
 # ---- rendered turbines (the one geometry) -----------------------------------------------------------
 @pytest.mark.parametrize("azimuth, yaw, side", [(0, 0, 0), (33, 120, 0), (90, 250, 0), (61, 10, 15),
                                                  (178, 300, -12)])

@@ -49,6 +49,7 @@ CLASS_INTERVALS = {HORIZONTAL: "[0, 30] U [150, 180)", ACUTE: "(30, 60] U [120, 
                    VERTICAL: "(60, 120)"}
 ANGLE_DIGITS = 6
 THETA_SOURCE = "principal_axis"
+STUB_ELONGATION = 3.0  # below this a blade region has no reliable axis of its own
 PHOTO_SUFFIXES = (".jpg", ".jpeg", ".webp")
 
 
@@ -354,8 +355,11 @@ class BladePitch:
     tip_px: tuple[float, float]  # far end
     centroid_px: tuple[float, float]
     elongation: float
+    theta_method: str = "principal_axis"  # or hub_to_centroid for a stub (elongation < 3)
 
     def __post_init__(self) -> None:
+        if self.theta_method not in ("principal_axis", "hub_to_centroid"):
+            raise ValueError(f"unknown theta_method {self.theta_method!r}")
         for name, period in (("theta_deg", 180.0), ("theta_eq7_deg", 180.0), ("phi_deg", 360.0)):
             v = getattr(self, name)
             if not (math.isfinite(v) and 0.0 <= v < period):
@@ -375,7 +379,8 @@ class BladePitch:
                 "rect": {"center": list(r.center), "size": [r.length, r.width],
                          "angle_deg": r.angle_deg, "top": list(r.top), "bottom": list(r.bottom)},
                 "root_px": list(self.root_px), "tip_px": list(self.tip_px),
-                "centroid_px": list(self.centroid_px), "elongation": self.elongation}
+                "centroid_px": list(self.centroid_px), "elongation": self.elongation,
+                "theta_method": self.theta_method}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> BladePitch:
@@ -385,7 +390,8 @@ class BladePitch:
         return cls(int(d["source_index"]), float(d["score"]), int(d["area"]),
                    float(d["theta_deg"]), str(d["theta_class"]), float(d["theta_eq7_deg"]),
                    float(d["phi_deg"]), rect, tuple(d["root_px"]), tuple(d["tip_px"]),
-                   tuple(d["centroid_px"]), float(d["elongation"]))
+                   tuple(d["centroid_px"]), float(d["elongation"]),
+                   str(d.get("theta_method", "principal_axis")))
 
 
 @dataclass(frozen=True)
@@ -489,15 +495,29 @@ def measure_pitch(contours: ContourSet, expected_blades: int | None = 3) -> Pitc
 
     out = []
     for inst, rect, ax in zip(blades, rects, axes):
-        a, b = ax.point(ax.t_min), ax.point(ax.t_max)
-        root, tip = (a, b) if np.linalg.norm(a - hub) <= np.linalg.norm(b - hub) else (b, a)
-        # φ follows the principal axis; hub decides which way along it the tip lies.
-        u = ax.direction
-        phi = ax.theta_deg if (tip - root) @ u > 0 else ax.theta_deg + 180.0
+        to_centroid = np.asarray(ax.centroid) - hub
+        if ax.elongation < STUB_ELONGATION and np.linalg.norm(to_centroid) > 2.0:
+            # A stub (cut by the frame) has no axis of its own: hub -> its centroid instead.
+            method = "hub_to_centroid"
+            u = to_centroid / np.linalg.norm(to_centroid)
+            region = inst.fill()
+            x0, y0, _, _ = inst.bbox
+            ys, xs = np.nonzero(region)
+            t = (xs + x0 - hub[0]) * u[0] + (ys + y0 - hub[1]) * u[1]
+            root, tip = hub + max(float(t.min()), 0.0) * u, hub + float(t.max()) * u
+            phi = image_angle(u[0], u[1])
+            theta = normalize_theta(phi)
+        else:
+            method = "principal_axis"
+            a, b = ax.point(ax.t_min), ax.point(ax.t_max)
+            root, tip = (a, b) if np.linalg.norm(a - hub) <= np.linalg.norm(b - hub) else (b, a)
+            # φ follows the principal axis; the hub decides which way along it the tip lies.
+            theta = ax.theta_deg
+            phi = theta if (tip - root) @ ax.direction > 0 else theta + 180.0
         out.append(BladePitch(
-            inst.source_index, inst.score, inst.area, ax.theta_deg, classify_theta(ax.theta_deg),
+            inst.source_index, inst.score, inst.area, theta, classify_theta(theta),
             rect.angle_deg, normalize_phi(phi), rect, (float(root[0]), float(root[1])),
-            (float(tip[0]), float(tip[1])), ax.centroid, ax.elongation))
+            (float(tip[0]), float(tip[1])), ax.centroid, ax.elongation, method))
     return PitchResult(tuple(out), (float(hub[0]), float(hub[1])), source, contours.image_size,
                        contours.image, contours.source, contours.area_threshold,
                        None if conv is None else (float(conv[0]), float(conv[1])), others,
