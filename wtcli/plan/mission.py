@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from functools import lru_cache
 
 import numpy as np
 
@@ -37,6 +38,12 @@ SPLIT_BELOW = 0.985  # a single-pass flat side below this predicted coverage is 
 Z = np.array([0.0, 0.0, 1.0])
 
 
+@lru_cache(maxsize=65536)
+def _rotation(yaw_deg: float, pitch_deg: float) -> np.ndarray:
+    """The camera rotation a waypoint's yaw and gimbal pitch give (Camera's own, cached)."""
+    return Camera.rotation_from_yaw_pitch(yaw_deg, pitch_deg)
+
+
 def y_turbine(t: Turbine) -> Turbine:
     """The turbine as the fixed pattern assumes it: blade 1 up (90 deg), the others evenly spaced."""
     return replace(t, azimuths_deg=tuple((90.0 + k * 360.0 / t.n_blades) % 360.0
@@ -46,7 +53,9 @@ def y_turbine(t: Turbine) -> Turbine:
 def pass_params(mission: Mission) -> tuple[PassParams, float, float]:
     """(pass parameters, GSD the coverage is judged at, nominal GSD at the standoff)."""
     s, cam = mission.settings, mission.camera
-    req = s.required_clearance_m
+    # The legs' clearance is a sampled lower bound (up to LEG_STEP/2 pessimistic), so waypoints
+    # keep at least 0.3 m beyond the safe distance even with no tracking margin.
+    req = s.safe_distance_m + max(s.tracking_margin_m, 0.3)
     st_gsd = GSD_FILL * cam.distance_for_gsd(s.target_gsd_mm)
     st_min = 1.01 * req + 0.05  # the model's clearance is a slightly conservative lower bound
     if st_gsd >= st_min:
@@ -60,7 +69,8 @@ def pass_params(mission: Mission) -> tuple[PassParams, float, float]:
             f"surface, closer than safe_distance_m + tracking_margin_m = {req:g} m; use a longer "
             f"lens, a coarser target_gsd_mm (>= {float(cam.gsd_mm(st_min / GSD_FILL)):.2f}) or "
             "allow_coarser_gsd: true")
-    pp = PassParams(cam, st, 0.97 * cam.distance_for_gsd(gsd_eval), req, s.overlap, s.min_altitude_m)
+    pp = PassParams(cam, st, 0.97 * cam.distance_for_gsd(gsd_eval), req, st_min, s.overlap,
+                    s.min_altitude_m)
     return pp, gsd_eval, float(cam.gsd_mm(st))
 
 
@@ -320,7 +330,7 @@ def predict_coverage(t: Turbine, routes: list[Route], camera: Camera, gsd_mm: fl
         sel = np.nonzero(r.photo & np.array([str(c).startswith(prefix) for c in r.component]))[0]
         for i in sel:
             pos.append(r.pos[i])
-            rot.append(Camera.rotation_from_yaw_pitch(float(r.yaw_deg[i]), float(r.gimbal_pitch_deg[i])))
+            rot.append(_rotation(round(float(r.yaw_deg[i]), 6), round(float(r.gimbal_pitch_deg[i]), 6)))
     samples = t.surface_samples(spacing)
     return measure_coverage(samples, camera, np.array(pos).reshape(-1, 3),
                             np.array(rot).reshape(-1, 3, 3), gsd_mm, max_incidence)
@@ -329,7 +339,7 @@ def predict_coverage(t: Turbine, routes: list[Route], camera: Camera, gsd_mm: fl
 def _blade_coverage_from_chunks(t: Turbine, chunks: list[Chunk], camera: Camera, gsd_mm: float,
                                 spacing: float, max_incidence: float):
     pos = np.array([w.pos for c in chunks for w in c.wps if w.photo]).reshape(-1, 3)
-    rot = np.array([Camera.rotation_from_yaw_pitch(*_yaw_pitch(w.fwd))
+    rot = np.array([_rotation(*(round(v, 6) for v in _yaw_pitch(w.fwd)))
                     for c in chunks for w in c.wps if w.photo]).reshape(-1, 3, 3)
     return measure_coverage(t.surface_samples(spacing, "blades"), camera, pos, rot, gsd_mm,
                             max_incidence)
@@ -423,9 +433,13 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
         if enforce_safety and vals and min(vals) < s.min_side_coverage:
             worst = min(((b, side, v) for b, d in sides.items() for side, v in d.items()),
                         key=lambda x: x[2])
+            why = [n.split(": ", 1)[1] for n in notes
+                   if n.startswith(f"{t.id}/{worst[0]}/{worst[1]}:") and "blocked by" in n]
             raise PlanError(f"turbine {t.id} {worst[0]} {worst[1]}: predicted coverage "
                             f"{worst[2]:.1%} < min_side_coverage {s.min_side_coverage:.0%} at "
-                            f"{gsd_eval:.2f} mm/px" + (f" ({notes[0]})" if notes else ""))
+                            f"{gsd_eval:.2f} mm/px" + (f"; {why[0]}" if why else "")
+                            + f" with {pp.required:g} m clearance (safe distance + tracking "
+                            "margin); turn the rotor, or lower min_side_coverage to accept it")
 
     summary = _summary(routes, mission, pattern, check, coverage, assignment, gsd_eval,
                        gsd_nominal, pp, notes, launch)

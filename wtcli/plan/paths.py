@@ -50,6 +50,7 @@ class PassParams:
     standoff: float  # camera-to-surface distance, m
     max_standoff: float  # farthest camera-to-surface distance still within the target GSD
     required: float  # clearance every waypoint keeps, m
+    min_standoff: float  # closest camera-to-surface distance allowed (required + model slack)
     overlap: float
     min_altitude: float
 
@@ -110,6 +111,8 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
         if np.linalg.norm(out) > 1e-6:
             dirs.append(_unit(out))
         dirs += [t.axis, -t.axis]
+    t = min(site.turbines, key=lambda t: float(np.linalg.norm(m - t.hub_center)))
+    dirs += [t.blade_direction(k) for k in range(t.n_blades)]  # around a blade's tip
     side = np.cross(Z, q - p)
     if np.linalg.norm(side) > 1e-6:
         dirs += [_unit(side), -_unit(side)]
@@ -119,28 +122,43 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
         if all(float(u @ v) < 0.999 for v in uniq):
             uniq.append(u)
     dirs = uniq
-    cands: list[list[np.ndarray]] = []
-    for dist in (2.0, 4.0, 7.0, 11.0, 16.0, 24.0, 35.0, 50.0):
-        cands += [[m + dist * u] for u in dirs]
-        cands += [[p + dist * u] for u in dirs]
-        cands += [[q + dist * u] for u in dirs]
-        cands += [[p + dist * u, q + dist * u] for u in dirs]
-    legs0, legs1, owner = [], [], []
-    for i, vias in enumerate(cands):
-        chain = [p] + vias + [q]
-        for a, b in zip(chain[:-1], chain[1:]):
-            legs0.append(a)
-            legs1.append(b)
-            owner.append(i)
-    lb = site.segment_clearance(np.array(legs0), np.array(legs1), LEG_STEP, cap)
-    good = np.ones(len(cands), bool)
-    np.logical_and.at(good, np.array(owner), lb >= leg_required)
-    for i in np.nonzero(good)[0]:
-        vias = cands[i]
-        if ground is not None and any(v[2] < ground for v in vias):
+    gp, gq = _away(site, p), _away(site, q)  # straight away from the nearest part
+    for dist in (2.0, 4.0, 7.0, 11.0, 16.0, 24.0, 35.0, 50.0, 70.0, 95.0):  # nearest first
+        cands = [[m + dist * u] for u in dirs] + [[p + dist * u] for u in dirs] + \
+            [[q + dist * u] for u in dirs] + [[p + dist * u, q + dist * u] for u in dirs]
+        cands += [[p + dist * gp, q + dist * gq]]
+        cands += [[p + dist * gp, m + dist * u, q + dist * gq] for u in dirs]
+        if ground is not None:
+            cands = [c for c in cands if all(v[2] >= ground for v in c)]
+        if not cands:
             continue
-        return vias
+        legs0, legs1, owner = [], [], []
+        for i, vias in enumerate(cands):
+            chain = [p] + vias + [q]
+            for a, b in zip(chain[:-1], chain[1:]):
+                legs0.append(a)
+                legs1.append(b)
+                owner.append(i)
+        lb = site.segment_clearance(np.array(legs0), np.array(legs1), LEG_STEP, cap)
+        good = np.ones(len(cands), bool)
+        np.logical_and.at(good, np.array(owner), lb >= leg_required)
+        if good.any():
+            best = min(np.nonzero(good)[0], key=lambda i: _chain_length([p] + cands[i] + [q]))
+            return cands[best]
     return None
+
+
+def _away(site: Site, x: np.ndarray, h: float = 0.25) -> np.ndarray:
+    """Unit direction in which the clearance grows fastest at x (central differences)."""
+    e = np.eye(3) * h
+    c = site.clearance(np.vstack([x + e, x - e]))
+    g = c[:3] - c[3:]
+    n = np.linalg.norm(g)
+    return g / n if n > 1e-9 else Z
+
+
+def _chain_length(chain: list[np.ndarray]) -> float:
+    return float(sum(np.linalg.norm(b - a) for a, b in zip(chain[:-1], chain[1:])))
 
 
 # ---- blades ------------------------------------------------------------------------------------------
@@ -189,6 +207,7 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
     S = blade_stations(turbine, spacing)
     passes: list[tuple[str, np.ndarray, np.ndarray]] = []  # (side, positions, fwd) root -> tip
     extra = [0.0] + [e for e in (0.5, 1.0, 1.5) if pp.standoff + e <= pp.max_standoff]
+    closer = [e for e in (-0.5, -1.0) if pp.standoff + e >= pp.min_standoff]
     for side in BLADE_SIDES:
         sc, sn = SIDE_DIRS[side]
         g0 = math.atan2(sn, sc)
@@ -211,12 +230,12 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
             pos, fwd = pos0.copy(), fwd0.copy()
             keep = ~blocked if sign > 0 else np.zeros(len(S), bool)
             # Every candidate (station, alpha, extra standoff) at once, in preference order.
-            J, AL, EX = np.meshgrid(jj, alphas, np.array(extra), indexing="ij")
+            J, AL, EX = np.meshgrid(jj, alphas, np.array(closer + extra), indexing="ij")
             J, AL, EX = J.ravel(), AL.ravel(), EX.ravel()
             cp, cf = _side_points(turbine, k, S[J], g0 + sign * AL, pp.standoff + EX)
             ok = (site.clearance(cp, pp.required + 1.0) >= pp.required) & \
                 (cp[:, 2] >= site.ground_z(cp) + pp.min_altitude)
-            per = len(alphas) * len(extra)
+            per = len(alphas) * len(closer + extra)
             okm = ok.reshape(len(jj), per)
             first = np.argmax(okm, axis=1)
             found = okm.any(axis=1)
@@ -228,9 +247,10 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
             if keep.any():
                 passes.append((side, pos[keep], fwd[keep]))
             if (~found).any():
+                parts = sorted({site.nearest_part(pos0[j])[0] for j in jj[~found]})
                 chunk.notes.append(f"{label}/{side}: {int((~found).sum())} station(s) unreachable "
-                                   f"from the {'+' if sign > 0 else '-'} side at a safe distance: "
-                                   "dropped")
+                                   f"from the {'+' if sign > 0 else '-'} side at a safe distance "
+                                   f"(blocked by {', '.join(parts)}): dropped")
 
     # Alternate out and back; join passes with arcs around the blade axis.
     for i, (side, pos, fwd) in enumerate(passes):
@@ -238,7 +258,23 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
             pos, fwd = pos[::-1], fwd[::-1]
         comp = f"{label}/{side}"
         if chunk.wps:
-            _join(chunk.wps, pos[0], fwd[0], turbine, k, site, pp, comp)
+            joined = False
+            for attempt in range(4):  # a crowded root end: start the pass one station later
+                try:
+                    _join(chunk.wps, pos[0], fwd[0], turbine, k, site, pp, comp)
+                    joined = True
+                    break
+                except _Blocked:
+                    if len(pos) < 3:
+                        break
+                    pos, fwd = pos[1:], fwd[1:]
+            if not joined:
+                chunk.notes.append(f"{comp}: no safe path from the previous pass (blocked by "
+                                   f"{site.nearest_part(pos[0])[0]}): pass dropped")
+                continue
+            if attempt:
+                chunk.notes.append(f"{comp}: {attempt} first station(s) unreachable from the "
+                                   "previous pass: dropped")
         append_chain(chunk, site, pp, [WP(p, f, True, comp) for p, f in zip(pos, fwd)])
     wps = chunk.wps
     if not wps:
@@ -246,14 +282,18 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
         return chunk
     # Eq. 8's return leg: back to the blade's start point S_p,i.
     start = wps[0]
-    _join(wps, start.pos, start.fwd, turbine, k, site, pp, f"{label}/return")
-    wps.append(WP(start.pos.copy(), start.fwd, False, f"{label}/return"))
+    try:
+        _join(wps, start.pos, start.fwd, turbine, k, site, pp, f"{label}/return")
+        wps.append(WP(start.pos.copy(), start.fwd, False, f"{label}/return"))
+    except _Blocked:
+        chunk.notes.append(f"{label}: no safe return to the blade's start point; the flight "
+                           "goes on from the last pass")
     return chunk
 
 
-def _arc(turbine: Turbine, k: int, s: float, g_from: float, g_to: float, radius: float,
+def _arc(turbine: Turbine, frame: tuple, s: float, g_from: float, g_to: float, radius: float,
          long_way: bool = False) -> list[np.ndarray]:
-    d, c, n = turbine.blade_frame(k)
+    d, c, n = frame
     dg = (g_to - g_from + math.pi) % (2 * math.pi) - math.pi
     if long_way:
         dg -= math.copysign(2 * math.pi, dg)
@@ -294,30 +334,32 @@ def _join(wps: list[WP], q: np.ndarray, q_fwd: np.ndarray, turbine: Turbine, k: 
                 vias = []
                 if abs(s - sp) > 1e-6:
                     vias.append(hc + s * d + (p - hc - sp * d))
-                vias += _arc(turbine, k, s, gp, gq, radius if s <= s_end else rp, long_way)
+                vias += _arc(turbine, (d, c, n), s, gp, gq, radius if s <= s_end else rp, long_way)
                 if abs(s - sq) > 1e-6:
                     vias.append(hc + s * d + (q - hc - sq * d))
                 cands.append(vias)
-        # All candidates checked at once; the first (nearest the passes' end) that clears wins.
-        legs0, legs1, owner, pts, pown = [], [], [], [], []
-        for i, vias in enumerate(cands):
-            chain = [p] + vias + [q]
-            legs0 += chain[:-1]
-            legs1 += chain[1:]
-            owner += [i] * (len(chain) - 1)
-            pts += vias
-            pown += [i] * len(vias)
-        good = np.ones(len(cands), bool)
-        lb = site.segment_clearance(np.array(legs0), np.array(legs1), LEG_STEP, pp.required + 1)
-        np.logical_and.at(good, np.array(owner), lb >= pp.leg_required)
-        if pts:
-            P = np.array(pts)
-            okp = (site.clearance(P, pp.required + 1) >= pp.required) & \
-                (P[:, 2] >= site.ground_z(P) + pp.min_altitude)
-            np.logical_and.at(good, np.array(pown), okp)
-        if good.any():
-            wps += [WP(v, None, False, comp) for v in cands[int(np.argmax(good))]]
-            return
+        # Candidates checked a few at a time; the first (nearest the passes' end) that clears wins.
+        for b0 in range(0, len(cands), 6):
+            batch = cands[b0:b0 + 6]
+            legs0, legs1, owner, pts, pown = [], [], [], [], []
+            for i, vias in enumerate(batch):
+                chain = [p] + vias + [q]
+                legs0 += chain[:-1]
+                legs1 += chain[1:]
+                owner += [i] * (len(chain) - 1)
+                pts += vias
+                pown += [i] * len(vias)
+            good = np.ones(len(batch), bool)
+            lb = site.segment_clearance(np.array(legs0), np.array(legs1), LEG_STEP, pp.required + 1)
+            np.logical_and.at(good, np.array(owner), lb >= pp.leg_required)
+            if pts:
+                P = np.array(pts)
+                okp = (site.clearance(P, pp.required + 1) >= pp.required) & \
+                    (P[:, 2] >= site.ground_z(P) + pp.min_altitude)
+                np.logical_and.at(good, np.array(pown), okp)
+            if good.any():
+                wps += [WP(v, None, False, comp) for v in batch[int(np.argmax(good))]]
+                return
     gmin = float(site.ground_z(np.array([p, q])).min()) + pp.min_altitude
     vias = connect(site, p, q, pp.leg_required, hints=[_unit(p - hc - sp * d)], ground=gmin)
     if vias is None:
@@ -362,7 +404,8 @@ def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams) -> Chunk:
         keep = _filter_stations(site, pp, pos)
         if (~keep).any():
             chunk.notes.append(f"{comp}: {int((~keep).sum())} station(s) too close to a part: dropped")
-        append_chain(chunk, site, pp, [WP(p, f, True, comp) for p, f in zip(pos[keep], fwd[keep])])
+        append_chain(chunk, site, pp, [WP(p, f, True, comp) for p, f in zip(pos[keep], fwd[keep])],
+                     droppable=True)
     return chunk
 
 
@@ -410,12 +453,14 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
                 arc = arc[site.clearance(arc, pp.required + 1) >= pp.required]
             new += [WP(v, None, False, comp) for v in arc]
         new += [WP(p, f, True, comp) for p, f in zip(pos[keep], fwd[keep])]
-        append_chain(chunk, site, pp, new)
+        append_chain(chunk, site, pp, new, droppable=True)
     return chunk
 
 
-def append_chain(chunk: Chunk, site: Site, pp: PassParams, new: list[WP]) -> None:
-    """Append waypoints in order; legs that do not keep the clearance get via points."""
+def append_chain(chunk: Chunk, site: Site, pp: PassParams, new: list[WP],
+                 droppable: bool = False) -> None:
+    """Append waypoints in order; legs that do not keep the clearance get via points. A station
+    no safe detour reaches is an error, or with ``droppable`` (tower, nacelle) left out."""
     if not new:
         return
     pts = np.array(([chunk.wps[-1].pos] if chunk.wps else []) + [w.pos for w in new])
@@ -423,12 +468,22 @@ def append_chain(chunk: Chunk, site: Site, pp: PassParams, new: list[WP]) -> Non
     if len(pts) > 1:
         lb = site.segment_clearance(pts[:-1], pts[1:], LEG_STEP, pp.required + 1)
         bad[len(new) - len(lb):] = lb < pp.leg_required
+    dropped = False
     for w, b in zip(new, bad):
+        if dropped and chunk.wps:  # the previous station was left out: check this leg afresh
+            prev = chunk.wps[-1].pos
+            b = site.segment_clearance(prev[None], w.pos[None], LEG_STEP, pp.required + 1)[0] \
+                < pp.leg_required
+        dropped = False
         if b:
             p = chunk.wps[-1].pos
             gmin = float(site.ground_z(np.array([p, w.pos])).min()) + pp.min_altitude
             vias = connect(site, p, w.pos, pp.leg_required, ground=gmin)
             if vias is None:
+                if droppable:
+                    chunk.notes.append(f"{w.component}: a station no safe path reaches: dropped")
+                    dropped = True
+                    continue
                 raise _Blocked(f"no safe way between two {w.component} stations")
             chunk.wps += [WP(v, None, False, w.component) for v in vias]
         chunk.wps.append(w)

@@ -1,0 +1,346 @@
+"""plan: zone/S_p (eq. 1-3), blade angles -> 3D, trajectories, safety, coverage, CLI, bad input."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wtcli.errors import ConfigError, PlanError
+from wtcli.geometry import Camera, Turbine
+from wtcli.plan.config import Fleet, Mission, Settings, load_mission, mission_from_dict
+from wtcli.plan.mission import _yaw_pitch, plan_mission
+from wtcli.plan.zone import (azimuths_from_image_directions, azimuths_from_pitch,
+                             default_photo_camera, initial_point, zone)
+from wtcli.plan_file import read_plan
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "sample_images" / "turbines.yaml"
+CAM = Camera(5456, 3632, 16, 23.2)
+
+
+def make_turbine(az=90.0, yaw=0.0, tid="T1", base=(0, 0, 0), **kw):
+    args = dict(id=tid, base=base, hub_height=80, rotor_diameter=90, yaw_deg=yaw)
+    args.update(kw)
+    return Turbine.with_rotor_azimuth(az, **args)
+
+
+def assert_safe(plan, safe):
+    """Independent check with the one turbine model: every waypoint and leg, every turbine."""
+    for r in plan.routes:
+        for t in plan.turbines:
+            assert t.clearance(r.pos).min() >= safe
+            assert t.segment_clearance(r.pos[:-1], r.pos[1:], step=0.5).min() >= safe
+
+
+# ---- eq. 1-3 and back-projection ------------------------------------------------------------------
+def test_zone_and_initial_point_known_answer():
+    t = make_turbine(az=90, yaw=90)  # rotor faces east: the paper's +x
+    z = zone(t)
+    assert np.allclose(z.center, t.hub_center)  # evenly spaced tips average to the hub
+    assert z.radius == pytest.approx(45.0)
+    assert np.allclose(initial_point(t, z), t.hub_center + [45.0, 0, 0])  # S_p = (x+R, y, z)
+    tips = np.array([[0, 0, 100.0], [0, 10, 60], [0, -10, 60]])  # measured tips (eq. 2 input)
+    z2 = zone(t, tips)
+    assert np.allclose(z2.center, [0, 0, 220 / 3])
+    assert z2.radius == pytest.approx(max(np.linalg.norm(tips - z2.center, axis=1)))
+    assert z2.contains(z2.center[None])[0]
+
+
+@pytest.mark.parametrize("yaw", [0, 133, 270])
+@pytest.mark.parametrize("az", [10, 95, 260])
+def test_front_photo_angles_back_project_to_azimuths(yaw, az):
+    t = make_turbine(az=az, yaw=yaw)
+    cam = default_photo_camera(t, Camera(1280, 960, 16, 23.2))
+    hub_uv, _ = cam.project(t.hub_center[None])
+    phis = [cam.image_angle_deg(t.hub_center, tip) for tip in t.blade_tips()]
+    got = azimuths_from_image_directions(t, cam, hub_uv[0], phis, [200, 200, 200])
+    for g, w in zip(got, t.azimuths_deg):
+        assert abs((g - w + 180) % 360 - 180) < 1e-3
+
+
+def test_oblique_photo_back_projection_matches_ground_truth():
+    """Sample renders are taken off-axis (with roll): the image angle φ is not the rotor azimuth,
+    the back-projection through the photo's camera is."""
+    gt = json.loads((ROOT / "sample_images" / "ground_truth.json").read_text())["images"]
+    checked = 0
+    for rec in gt.values():
+        t = Turbine.from_dict(rec["turbine"])
+        c = rec["camera"]
+        cam = Camera(c["width_px"], c["height_px"], c["focal_mm"], c["sensor_width_mm"],
+                     np.array(c["position"]), np.array(c["R"]))
+        blades = [b for b in rec["blades"] if b["visible"]]
+        if len(blades) < 3:
+            continue
+        lengths = [math.dist(b["tip_px"], rec["hub_px"]) for b in blades]
+        got = azimuths_from_image_directions(t, cam, rec["hub_px"], [b["phi_deg"] for b in blades],
+                                             lengths)
+        naive_err, err = 0.0, 0.0
+        for g, b in zip(got, blades):
+            want = b["rotor_azimuth_deg"]
+            err = max(err, abs((g - want + 180) % 360 - 180))
+            naive_err = max(naive_err, abs((b["phi_deg"] - want + 180) % 360 - 180))
+        assert err < 0.5, (err, naive_err)
+        checked += 1
+    assert checked >= 1
+
+
+def test_azimuths_from_pitch_result_of_rendered_masks():
+    from wtcli.geometry.render import instance_masks
+    from wtcli.masks import Instances
+    from wtcli.pitch import pitch_from_instances
+
+    t = make_turbine(az=33, yaw=220)
+    cam = default_photo_camera(t, Camera(800, 600, 16, 23.2))
+    inst = instance_masks(t, cam)
+    res = pitch_from_instances(Instances(np.array([l for l, _, _ in inst], dtype=object),
+                                         np.array([m for _, _, m in inst])), expected_blades=3)
+    got = sorted(azimuths_from_pitch(t, res, CAM))
+    for g, w in zip(got, sorted(t.azimuths_deg)):
+        assert abs((g - w + 180) % 360 - 180) < 2.0
+
+
+def test_yaw_pitch_is_what_the_camera_uses():
+    for fwd in ([0, 1, 0], [1, 0, 0], [0.3, -0.2, -0.9], [-0.5, 0.5, 0.7]):
+        f = np.array(fwd, float) / np.linalg.norm(fwd)
+        R = Camera.rotation_from_yaw_pitch(*_yaw_pitch(f))
+        assert np.allclose(R[2], f, atol=1e-9)
+
+
+# ---- planning ---------------------------------------------------------------------------------------
+def test_blade_down_in_front_of_the_tower_is_refused_with_the_reason():
+    t = make_turbine(az=17 + 240, yaw=60)  # blade 1 at 257 deg: its trailing edge faces the tower
+    with pytest.raises(PlanError, match=r"trailing_edge.*tower"):
+        plan_mission(Mission((t,), CAM, settings=Settings(min_side_coverage=0.95)))
+    plan = plan_mission(Mission((t,), CAM, settings=Settings(min_side_coverage=0.5)))
+    assert_safe(plan, 3.0)
+
+
+def test_single_turbine_plan_is_safe_covers_and_is_well_formed():
+    t = make_turbine(az=80, yaw=60)
+    m = Mission((t,), CAM)
+    plan = plan_mission(m)
+    s = plan.summary
+    assert s["min_clearance_m"] >= m.settings.safe_distance_m
+    assert not any(s["violations"].values())
+    assert_safe(plan, m.settings.safe_distance_m)
+    cov = s["predicted_coverage"]["T1"]
+    assert cov["blade_average"] >= 0.98
+    assert cov["min_side"] >= m.settings.min_side_coverage
+    r = plan.routes[0]
+    assert np.allclose(r.pos[0], r.pos[-1])  # take off and land at the launch point
+    assert r.component[0] == "launch" and r.component[-1] == "return"
+    assert (np.diff(r.t) >= 0).all() and r.photo.sum() == s["photos"]
+    comps = set(r.component)
+    for k in (1, 2, 3):
+        for side in ("leading_edge", "trailing_edge", "pressure_side", "suction_side"):
+            assert f"T1/blade{k}/{side}" in comps
+    assert {"T1/tower", "T1/nacelle", "T1/overview", "transit"} <= comps
+    for key in ("total_length_m", "total_time_s", "photos", "min_clearance_m", "per_uav",
+                "per_component", "predicted_coverage"):
+        assert key in s
+    assert s["per_component"]["T1/blade1/leading_edge"]["photos"] > 10
+
+
+def test_standoff_is_raised_to_the_safe_distance_and_gsd_reported():
+    t = make_turbine(az=50)
+    m = Mission((t,), CAM, settings=Settings(target_gsd_mm=1.0, min_side_coverage=0.0))
+    plan = plan_mission(m)
+    s = plan.summary
+    assert s["standoff_m"] >= m.settings.required_clearance_m
+    assert s["achieved_gsd_mm"] > 1.0 and plan.target_gsd_mm > 1.0
+    with pytest.raises(PlanError, match="target_gsd_mm"):
+        plan_mission(Mission((t,), CAM, settings=Settings(target_gsd_mm=1.0, allow_coarser_gsd=False)))
+
+
+def test_fixed_y_baseline_is_reported_not_refused():
+    t = make_turbine(az=30, yaw=0)  # a real stop far from a Y
+    m = Mission((t,), CAM, settings=Settings(min_side_coverage=0.0))
+    adaptive = plan_mission(m)
+    fixed = plan_mission(m, pattern="fixed-y")
+    assert fixed.turbines[0].azimuths_deg == t.azimuths_deg  # judged against the real rotor
+    assert fixed.summary["pattern"] == "fixed-y"
+    a = adaptive.summary["predicted_coverage"]["T1"]["blade_average"]
+    f = fixed.summary["predicted_coverage"]["T1"]["blade_average"]
+    assert f < a - 0.2
+    with pytest.raises(PlanError):
+        plan_mission(m, pattern="fixed-y", enforce_safety=True)
+
+
+def test_azimuth_override_and_several_uavs_balance():
+    ts = tuple(make_turbine(az=40 * i, yaw=15 * i, tid=f"T{i + 1}", base=(300.0 * i, 50.0 * (i % 2), 0))
+               for i in range(4))
+    m = Mission(ts, CAM, fleet=Fleet(uavs=("A", "B"), launch=(450.0, -150.0, 0.0)),
+                settings=Settings(inspect_tower=False, inspect_nacelle=False, min_side_coverage=0.0))
+    plan = plan_mission(m, azimuths={"T1": [90, 210, 330]})
+    assert plan.turbine("T1").azimuths_deg == (90.0, 210.0, 330.0)
+    per = plan.summary["per_uav"]
+    assert sorted(sum((per[u]["turbines"] for u in per), [])) == ["T1", "T2", "T3", "T4"]
+    times = [per[u]["time_s"] for u in ("A", "B")]
+    assert max(times) < 1.6 * min(times)
+    assert_safe(plan, 3.0)
+
+
+def test_battery_limit_inserts_swaps_or_refuses():
+    t = make_turbine(az=70)
+    m = Mission((t,), CAM, fleet=Fleet(battery_minutes=9, battery_reserve_minutes=2),
+                settings=Settings(min_side_coverage=0.0))
+    plan = plan_mission(m)
+    r = plan.routes[0]
+    assert r.summary["battery_swaps"] >= 1
+    at_launch = np.linalg.norm(r.pos - r.pos[0], axis=1) < 1e-6
+    assert at_launch.sum() >= 3  # landed mid-mission to swap
+    legs = np.split(np.arange(len(r)), np.nonzero(at_launch)[0])
+    for idx in legs:
+        if len(idx) > 1:
+            assert r.t[idx[-1]] - r.t[idx[0]] <= 7 * 60 + 1e-6
+    with pytest.raises(PlanError, match="battery"):
+        plan_mission(Mission((t,), CAM, fleet=Fleet(battery_minutes=3, battery_reserve_minutes=1)))
+
+
+def test_launch_point_too_close_is_refused():
+    t = make_turbine()
+    with pytest.raises(PlanError, match="launch point"):
+        plan_mission(Mission((t,), CAM, fleet=Fleet(launch=(1.0, 1.0, 0.0))))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_property_clearance_quick(seed):
+    _property_cases(seed, 6)
+
+
+@pytest.mark.slow
+def test_property_clearance_1000():
+    """The full suite: 1000 random turbines, azimuths, yaws, sizes and fleets."""
+    _property_cases(1000, 1000)
+
+
+def _property_cases(seed: int, n: int) -> None:
+    rng = np.random.default_rng(seed)
+    for _ in range(n):
+        case = random_case(rng)
+        plan = plan_mission(case)
+        assert_safe(plan, case.settings.safe_distance_m)
+
+
+def random_case(rng: np.random.Generator) -> Mission:
+    """A random site: 1-3 turbines (radius 20-75 m, any yaw and stop angle), 1-3 UAVs."""
+    n = int(rng.integers(1, 4))
+    ts = []
+    for i in range(n):
+        R = float(rng.uniform(20, 75))
+        ts.append(Turbine.with_rotor_azimuth(
+            float(rng.uniform(0, 360)), id=f"T{i + 1}",
+            base=(float(i * rng.uniform(2.5, 4) * 2 * R), float(rng.uniform(-50, 50)),
+                  float(rng.uniform(0, 20))),
+            hub_height=float(rng.uniform(R + 10, R + 60)), rotor_diameter=2 * R,
+            yaw_deg=float(rng.uniform(0, 360)), blade_pitch_deg=float(rng.choice([90.0, rng.uniform(60, 90)]))))
+    uavs = tuple(f"U{k}" for k in range(int(rng.integers(1, 4))))
+    return Mission(tuple(ts), CAM, fleet=Fleet(uavs=uavs),
+                   settings=Settings(safe_distance_m=float(rng.uniform(2.5, 6)),
+                                     tracking_margin_m=float(rng.uniform(0, 1.5)),
+                                     target_gsd_mm=float(rng.uniform(1.2, 2.5)),
+                                     min_side_coverage=0.0, coverage_spacing_m=2.0))
+
+
+# ---- turbines.yaml --------------------------------------------------------------------------------------
+def test_sample_yaml_loads_and_converts_lat_lon(tmp_path):
+    m = load_mission(SAMPLE)
+    assert [t.id for t in m.turbines] == ["T1", "T2"]
+    assert m.site_origin["lat"] == pytest.approx(53.5511)
+    assert m.turbine("T1").azimuths_deg == (80.0, 200.0, 320.0)
+    d = {"site": {"origin": {"lat": 50.0, "lon": 8.0, "alt": 100}},
+         "turbines": [{"id": "A", "lat": 50.001, "lon": 8.0, "alt": 100, "hub_height_m": 80,
+                       "rotor_diameter_m": 90, "yaw_deg": 0}]}
+    m2 = mission_from_dict(d)
+    assert m2.turbine("A").base[1] == pytest.approx(111.2, abs=0.5)  # 0.001 deg of latitude
+
+
+@pytest.mark.parametrize("patch, message", [
+    ({"mission": {"safe_distnce_m": 3}}, "did you mean 'safe_distance_m'"),
+    ({"mission": {"safe_distance_m": -1}}, r"mission.safe_distance_m: expected a number in \[0.5, 100\], got -1"),
+    ({"fleet": {"uavs": 0}}, "fleet.uavs: expected a count in"),
+    ({"turbines": []}, "expected a non-empty list"),
+    ({"turbines": [{"id": "X", "position": [0, 0, 0], "hub_height_m": 80, "rotor_diameter_m": 90,
+                    "yaw_deg": 400}]}, r"turbines\[0\].yaw_deg: expected a number in \[0, 360\], got 400"),
+    ({"turbines": [{"id": "X", "position": [0, 0, 0], "hub_height_m": 40, "rotor_diameter_m": 90,
+                    "yaw_deg": 0}]}, "hub_height"),
+    ({"turbines": [{"id": "X", "lat": 1, "lon": 2, "hub_height_m": 80, "rotor_diameter_m": 90,
+                    "yaw_deg": 0}]}, "needs site.origin"),
+    ({"turbines": [{"id": "X", "position": [0, 0, 0], "hub_height_m": 80, "rotor_diameter_m": 90,
+                    "yaw_deg": 0, "blade_azimuths_deg": [1, 2]}]}, "expected a list of 3 angles"),
+    ({"turbines": [{"id": "X", "position": [0, 0, 0], "hub_hieght_m": 80}]}, "did you mean 'hub_height_m'"),
+])
+def test_bad_yaml_names_key_value_and_range(patch, message):
+    base = {"turbines": [{"id": "T1", "position": [0, 0, 0], "hub_height_m": 80,
+                          "rotor_diameter_m": 90, "yaw_deg": 0}]}
+    base.update(patch)
+    with pytest.raises(ConfigError, match=message):
+        mission_from_dict(base, where="t.yaml")
+
+
+def test_measured_tips_set_zone_and_azimuths():
+    t = make_turbine(az=64, yaw=123)
+    d = {"turbines": [{"id": "T1", "position": [0, 0, 0], "hub_height_m": 80, "rotor_diameter_m": 90,
+                       "yaw_deg": 123, "blade_tips": t.blade_tips().tolist()}]}
+    m = mission_from_dict(d)
+    assert m.extra("T1").azimuth_source == "tips"
+    assert np.allclose(sorted(m.turbine("T1").azimuths_deg), sorted(t.azimuths_deg), atol=1e-6)
+
+
+# ---- CLI ---------------------------------------------------------------------------------------------------
+def test_cli_plan_sample_writes_plan_exports_and_picture(cli, tmp_path):
+    out = tmp_path / "plan.json"
+    r = cli("plan", SAMPLE, "--out", out, "--export-dir", tmp_path / "exp", "--picture",
+            tmp_path / "plan.png")
+    assert r.exit_code == 0, r.output
+    plan = read_plan(out)
+    assert len(plan.turbines) == 2 and plan.site_origin
+    assert (tmp_path / "plan.png").stat().st_size > 1000
+    assert sorted(p.suffix for p in (tmp_path / "exp").iterdir()).count(".waypoints") >= 1
+
+
+def test_cli_json_is_one_document(cli):
+    r = cli("plan", SAMPLE, "--json")
+    assert r.exit_code == 0
+    doc = json.loads(r.stdout)
+    assert doc["schema"] == "wtinspect.plan" and doc["summary"]["photos"] > 0
+
+
+def test_cli_pitch_json_input_sets_azimuths(cli, tmp_path):
+    from wtcli.geometry.render import instance_masks
+    from wtcli.jsonio import document, write_json
+    from wtcli.masks import Instances
+    from wtcli.pitch import PITCH_SCHEMA, PITCH_VERSION, pitch_from_instances
+
+    m = load_mission(SAMPLE)
+    t = m.turbine("T2")
+    cam = default_photo_camera(t, Camera(800, 600, 16, 23.2))
+    inst = instance_masks(t, cam)
+    res = pitch_from_instances(Instances(np.array([l for l, _, _ in inst], dtype=object),
+                                         np.array([x for _, _, x in inst])), expected_blades=3)
+    pj = tmp_path / "t2_pitch.json"
+    write_json(pj, document(PITCH_SCHEMA, PITCH_VERSION, {"images": [{**res.to_dict(), "error": None}]}))
+    out = tmp_path / "plan.json"
+    r = cli("plan", SAMPLE, f"T2={pj}", "--out", out)
+    assert r.exit_code == 0, r.output
+    got = sorted(read_plan(out).turbine("T2").azimuths_deg)
+    for g, w in zip(got, sorted(t.azimuths_deg)):
+        assert abs((g - w + 180) % 360 - 180) < 2.0
+
+
+def test_cli_bad_inputs_exit_codes(cli, tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("turbines:\n  - id: T1\n    positon: [0, 0, 0]\n")
+    r = cli("plan", bad)
+    assert r.exit_code == 4 and "did you mean 'position'" in r.output
+    assert cli("plan", tmp_path / "missing.yaml").exit_code == 4
+    assert cli("plan", SAMPLE, "--pattern", "spiral").exit_code == 4
+    assert cli("plan", SAMPLE, "T1=" + str(tmp_path / "nope.json")).exit_code == 3
+    tight = tmp_path / "tight.yaml"
+    tight.write_text(SAMPLE.read_text().replace("battery_minutes: 30", "battery_minutes: 6"))
+    r = cli("plan", tight)
+    assert r.exit_code == 6 and "battery" in r.output
