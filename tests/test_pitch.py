@@ -299,6 +299,21 @@ def test_a_far_rotor_right_behind_the_hub():
         pitch_from_instances(inst)
 
 
+def test_a_far_nacelle_never_turns_the_blades_around():
+    h = w = 400
+    main = rotor(h, w, [10, 130, 250], 12, length=150, nacelle=False)
+    far = np.zeros((h, w), np.uint8)
+    cv2.circle(far, (355, 170), 6, 1, -1)  # just beyond the tip of the 10° blade
+    inst = Instances(np.concatenate([main.labels, ["nacelle"]]),
+                     np.concatenate([main.masks, far[None] > 0]))
+    res = pitch_from_instances(inst)
+    assert res.hub_source == "blade_axes"
+    assert sorted(round(p) for p in res.phis) == [10, 130, 250]
+    one = Instances(np.array(["blade", "nacelle"], object), np.stack([main.masks[0], far > 0]))
+    res = pitch_from_instances(one, expected_blades=1)
+    assert res.hub_source == "blade_taper" and round(res.blades[0].phi_deg) == 10
+
+
 def test_two_opposite_blades_without_nacelle_use_their_common_end():
     cs = find_contours(rotor(240, 240, [30, 210], 12, length=100, nacelle=False), 50)
     res = measure_pitch(cs, 2)

@@ -207,8 +207,9 @@ def common_end(axes: list[Axis]) -> np.ndarray:
     return np.mean(chosen, axis=0)
 
 
-def wider_end(inst: InstanceContours, ax: Axis) -> np.ndarray:
-    """One blade alone: the end whose last quarter holds more pixels (root wider than tip)."""
+def wider_end(inst: InstanceContours, ax: Axis, decisive: bool = False) -> np.ndarray | None:
+    """One blade alone: the end whose last quarter holds more pixels (root wider than tip).
+    With ``decisive``, None unless one quarter holds at least 15 % more than the other."""
     region = inst.fill()
     x0, y0, _, _ = inst.bbox
     ys, xs = np.nonzero(region)
@@ -217,13 +218,17 @@ def wider_end(inst: InstanceContours, ax: Axis) -> np.ndarray:
     q = 0.25 * (ax.t_max - ax.t_min)
     n_low = int((t < ax.t_min + q).sum())
     n_high = int((t > ax.t_max - q).sum())
+    if decisive and max(n_low, n_high) < 1.15 * min(n_low, n_high):
+        return None
     return ax.point(ax.t_min if n_low >= n_high else ax.t_max)
 
 
-def nacelle_hub(nacelles: ContourSet, near: np.ndarray | None) -> np.ndarray | None:
-    """Centroid of the nacelle/hub pixels near the blades' convergence point (or of the largest
-    nacelle region when there is no convergence point)."""
-    if len(nacelles) == 0:
+def nacelle_hub(nacelles: ContourSet, near: np.ndarray | None, scale: float) -> np.ndarray | None:
+    """Centroid of the nacelle/hub pixels near ``near`` (where the blade axes meet): those
+    within the region's equivalent radius of it. None without ``near``, or when no nacelle
+    comes within ``0.25 * scale`` (the blades' median length) of it — a far turbine's
+    nacelle must not turn this rotor's blades around."""
+    if len(nacelles) == 0 or near is None:
         return None
     best, best_d = None, math.inf
     for inst in nacelles:
@@ -231,20 +236,13 @@ def nacelle_hub(nacelles: ContourSet, near: np.ndarray | None) -> np.ndarray | N
         x0, y0, _, _ = inst.bbox
         ys, xs = np.nonzero(region)
         pts = np.stack([xs + x0, ys + y0], 1).astype(float)
-        if near is None:
-            d = -len(pts)  # the largest
-            sel = pts
-        else:
-            dist = np.linalg.norm(pts - near, axis=1)
-            d = float(dist.min())
-            rho = math.sqrt(len(pts) / math.pi)  # the region's equivalent radius
-            sel = pts[dist <= max(rho, d + 1.0)]
+        dist = np.linalg.norm(pts - near, axis=1)
+        d = float(dist.min())
+        rho = math.sqrt(len(pts) / math.pi)  # the region's equivalent radius
         if d < best_d:
-            best, best_d = sel.mean(axis=0), d
-    if near is not None and best is not None:
-        # A nacelle far from where the blades meet is not this rotor's hub.
-        if np.linalg.norm(best - near) > 0.25 * max(nacelles.image_size):
-            return None
+            best, best_d = pts[dist <= max(rho, d + 1.0)].mean(axis=0), d
+    if best is None or np.linalg.norm(best - near) > 0.25 * scale + 3.0:
+        return None
     return best
 
 
@@ -483,7 +481,15 @@ def measure_pitch(contours: ContourSet, expected_blades: int | None = 3) -> Pitc
     lengths = [ax.t_max - ax.t_min for ax in axes]
 
     conv = axes_convergence(axes, lengths)
-    hub = nacelle_hub(nacelles, conv if conv is not None else candidate)
+    hub = nacelle_hub(nacelles, conv if conv is not None else candidate,
+                      float(np.median(lengths)))
+    if hub is not None and len(axes) == 1:
+        # One blade cannot check a nacelle against other blades; its taper can.
+        root = wider_end(blades.instances[0], axes[0], decisive=True)
+        ends = (axes[0].point(axes[0].t_min), axes[0].point(axes[0].t_max))
+        near_end = min(ends, key=lambda e: float(np.linalg.norm(e - hub)))
+        if root is not None and not np.allclose(root, near_end):
+            hub = None
     if hub is not None:
         source = "nacelle"
     elif conv is not None:
