@@ -164,3 +164,13 @@ def test_cli_out_is_a_file(cli, tmp_path):
     f.write_text("x")
     r = cli("synth", f, "--count", 1)
     assert r.exit_code == ExitCode.INPUT and "not a folder" in r.stderr
+
+
+@pytest.mark.parametrize("size", [(32, 32), (33, 47)])
+def test_tiny_images_render_cleanly(size):
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        s = render_sample(5, *size)
+    assert s.image.shape == (size[1], size[0], 3)

@@ -25,7 +25,7 @@ def fbm(rng: np.random.Generator, h: int, w: int, cells: float, octaves: int = 4
     amp, total = 1.0, 0.0
     for o in range(octaves):
         c = cells * (2 ** o)
-        if c > max(h, w) / 1.5:
+        if o > 0 and c > max(h, w) / 1.5:
             break
         out += amp * value_noise(rng, h, w, c)
         total += amp
@@ -54,7 +54,7 @@ def tile_fbm(rng: np.random.Generator, size: int, cells: int, octaves: int = 4,
     amp, total = 1.0, 0.0
     for o in range(octaves):
         c = cells * (2 ** o)
-        if c > size // 2:
+        if o > 0 and c > size // 2:
             break
         out += amp * tile_noise(rng, size, c)
         total += amp

@@ -18,6 +18,13 @@ def camera_effects(img: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarra
     gamma = float(rng.uniform(0.8, 1.25))
     wb = (1.0 + rng.normal(0, 0.035, 3)).astype(np.float32)
     fx.update(exposure=gain, gamma=gamma, white_balance=wb.tolist())
+    # Bloom: light from the sun and bright sky bleeds over nearby edges (thin blades too).
+    if rng.random() < 0.5:
+        small = cv2.resize(img, (max(1, W // 4), max(1, H // 4)), interpolation=cv2.INTER_AREA)
+        glow = cv2.GaussianBlur(np.clip(small - 0.85, 0, None), (0, 0), max(1.0, W / 160))
+        k = float(rng.uniform(0.3, 1.2))
+        img = img + k * cv2.resize(glow, (W, H), interpolation=cv2.INTER_LINEAR)
+        fx["bloom"] = k
     # Exposure and white balance, then a tone curve (optional soft highlight roll-off, gamma)
     # applied as a lookup table.
     x = np.linspace(0, 2, 2049, dtype=np.float32)
