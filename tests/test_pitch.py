@@ -431,7 +431,7 @@ def test_cli_bad_inputs(cli, tmp_path):
     one_line_error(cli("pitch", two), 5, "found 2 blades")
     empty = np.zeros((50, 50), np.uint8)
     cv2.imwrite(str(tmp_path / "empty.png"), empty)
-    one_line_error(cli("pitch", tmp_path / "empty.png"), 5, "the mask is empty")
+    one_line_error(cli("pitch", tmp_path / "empty.png"), 5, "no mask pixels in empty.png")
     tiny = empty.copy()
     tiny[5:8, 5:8] = 255
     cv2.imwrite(str(tmp_path / "tiny.png"), tiny)

@@ -246,7 +246,7 @@ def require_contours(cs: ContourSet) -> ContourSet:
                 f"no contour above the area threshold ({cs.area_threshold:g} px) in {cs.name}: "
                 f"{cs.dropped} contour(s) dropped, the largest {cs.largest_dropped_area} px "
                 "(lower --area-threshold?)")
-        raise PerceptionError(f"no instance mask in {cs.name}: the mask is empty")
+        raise PerceptionError(f"no mask pixels in {cs.name} (no instance, or its masks are empty)")
     return cs
 
 
