@@ -44,7 +44,7 @@ def register(app: typer.Typer) -> None:
         loaded = load_pitch_input(inputs, area_threshold)
         if image is not None and len(loaded) != 1:
             raise InputError(f"--image needs an input with one image, got {len(loaded)}")
-        if len(loaded) > 1:
+        if len(loaded) > 1 and err_console.is_terminal:
             with make_progress(transient=True) as progress:
                 task = progress.add_task("pitch", total=len(loaded), status="")
                 batch = pitch_batch(loaded, blades or None, source=str(inputs[0]),
