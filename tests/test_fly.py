@@ -278,3 +278,19 @@ def test_sim_speed_twenty_minutes_under_two_seconds():
     t0 = time.process_time()  # CPU time: robust to other jobs sharing the machine
     fly_plan(plan, scn)
     assert time.process_time() - t0 < 2.0
+
+
+@pytest.mark.slow
+def test_paper_strong_wind_scenario_meets_the_done_criteria():
+    """paper-s2 (8-12 m/s, turbulence, gusts, hills): mean deviation <= 0.5 m, no violation,
+    measured coverage >= 97 %; the manual pilot is slower and strays more."""
+    pytest.importorskip("wtcli.plan.mission")
+    from wtcli.fly.run import paper_table
+
+    (row,) = paper_table(names=("paper-s2",))
+    auto = row.report.automated
+    assert auto.deviation.mean() <= 0.5
+    assert not auto.violations and auto.min_clearance_m >= auto.safe_distance_m
+    assert auto.coverage_average >= 0.97
+    assert row.ours["manual"]["time_min"] > row.ours["automated"]["time_min"]
+    assert row.ours["manual"]["deviation_m"] > 5 * row.ours["automated"]["deviation_m"]

@@ -70,7 +70,7 @@ class PaperRow:
     def to_dict(self) -> dict[str, Any]:
         return {"scenario": self.name, "label": self.label, "paper": self.paper, "ours": self.ours,
                 "change": {who: {m: self.change(who, m) for m in METRICS} for who in ("paper", "ours")},
-                "strong_checks": {
+                "automated_safety": {
                     "min_clearance_m": self.report.automated.min_clearance_m,
                     "violations": len(self.report.automated.violations),
                     "deviation_rms_m": float(np.sqrt((self.report.automated.deviation ** 2).mean())),
