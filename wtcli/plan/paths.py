@@ -132,19 +132,26 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
             cands = [c for c in cands if all(v[2] >= ground for v in c)]
         if not cands:
             continue
-        legs0, legs1, owner = [], [], []
-        for i, vias in enumerate(cands):
-            chain = [p] + vias + [q]
-            for a, b in zip(chain[:-1], chain[1:]):
-                legs0.append(a)
-                legs1.append(b)
-                owner.append(i)
-        lb = site.segment_clearance(np.array(legs0), np.array(legs1), LEG_STEP, cap)
-        good = np.ones(len(cands), bool)
-        np.logical_and.at(good, np.array(owner), lb >= leg_required)
-        if good.any():
-            best = min(np.nonzero(good)[0], key=lambda i: _chain_length([p] + cands[i] + [q]))
-            return cands[best]
+        # Via points must clear themselves (cheap) before their legs are checked.
+        vp = np.array([v for c in cands for v in c])
+        vo = np.repeat(np.arange(len(cands)), [len(c) for c in cands])
+        okv = np.ones(len(cands), bool)
+        np.logical_and.at(okv, vo, site.clearance(vp, cap) >= leg_required)
+        cands = sorted((cands[i] for i in np.nonzero(okv)[0]),
+                       key=lambda c: _chain_length([p] + c + [q]))
+        for b0 in range(0, len(cands), 8):  # shortest first, a few at a time
+            batch = cands[b0:b0 + 8]
+            legs0, legs1, owner = [], [], []
+            for i, vias in enumerate(batch):
+                chain = [p] + vias + [q]
+                legs0 += chain[:-1]
+                legs1 += chain[1:]
+                owner += [i] * (len(chain) - 1)
+            lb = site.segment_clearance(np.array(legs0), np.array(legs1), LEG_STEP, cap)
+            good = np.ones(len(batch), bool)
+            np.logical_and.at(good, np.array(owner), lb >= leg_required)
+            if good.any():
+                return batch[int(np.argmax(good))]
     return None
 
 

@@ -54,8 +54,9 @@ def draw_plan(plan: Plan, panel: int = PANEL) -> np.ndarray:
     near = np.vstack([t0.blade_tips(), t0.base_xyz[None]] +
                      [r.pos[np.linalg.norm(r.pos - t0.hub_center, axis=1) < 1.3 * t0.tip_radius + 15]
                       for r in plan.routes])
-    canvas = np.full((panel + 40, 3 * panel, 3), 255, np.uint8)
+    panels = []
     for v, (name, M) in enumerate(views):
+        canvas = np.full((panel + 40, panel, 3), 255, np.uint8)  # each view clips to its own panel
         pts = allpts if name == "top" else near
         uv = pts @ M.T
         lo, hi = uv.min(axis=0), uv.max(axis=0)
@@ -64,9 +65,9 @@ def draw_plan(plan: Plan, panel: int = PANEL) -> np.ndarray:
 
         def px(P: np.ndarray) -> np.ndarray:
             q = (np.atleast_2d(P) @ M.T - center) * scale
-            return np.stack([v * panel + panel / 2 + q[:, 0], 40 + panel / 2 - q[:, 1]], axis=1)
+            return np.stack([panel / 2 + q[:, 0], 40 + panel / 2 - q[:, 1]], axis=1)
 
-        for t in plan.turbines:
+        for t in (plan.turbines if name == "top" else [t0]):
             for line, width, color in _turbine_polylines(t):
                 p = np.round(px(line)).astype(np.int32)
                 w = max(1, int(round(width * scale)))
@@ -76,21 +77,30 @@ def draw_plan(plan: Plan, panel: int = PANEL) -> np.ndarray:
                     cv2.polylines(canvas, [p.reshape(-1, 1, 2)], False, color, min(w, 60), cv2.LINE_AA)
         for i, r in enumerate(plan.routes):
             color = UAV_COLORS[i % len(UAV_COLORS)]
-            p = np.round(px(r.pos)).astype(np.int32)
-            cv2.polylines(canvas, [p.reshape(-1, 1, 2)], False, color, 1, cv2.LINE_AA)
-            for q in p[r.photo]:
+            p = np.round(np.clip(px(r.pos), -10 * panel, 10 * panel)).astype(np.int32)
+            keep = np.ones(len(p), bool)
+            if name != "top":  # front/side: only the first turbine's neighbourhood
+                keep = np.linalg.norm(r.pos - t0.hub_center, axis=1) < 1.3 * t0.tip_radius + 15
+                keep[0] = True
+            for run in np.split(np.arange(len(p)), np.nonzero(np.diff(keep.astype(int)))[0] + 1):
+                if keep[run[0]] and len(run) > 1:
+                    cv2.polylines(canvas, [p[run].reshape(-1, 1, 2)], False, color, 1, cv2.LINE_AA)
+            for q in p[r.photo & keep]:
                 cv2.circle(canvas, (int(q[0]), int(q[1])), 2, color, -1)
             cv2.drawMarker(canvas, tuple(int(x) for x in p[0]), (0, 0, 0), cv2.MARKER_TRIANGLE_UP, 12, 2)
         label = name if name == "top" or len(plan.turbines) == 1 else f"{name} ({t0.id})"
-        cv2.putText(canvas, label, (v * panel + 10, 28), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (0, 0, 0), 2,
-                    cv2.LINE_AA)
+        cv2.rectangle(canvas, (0, 0), (panel, 36), (255, 255, 255), -1)
+        cv2.putText(canvas, label, (10, 28), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (0, 0, 0), 2, cv2.LINE_AA)
         if v:
-            cv2.line(canvas, (v * panel, 0), (v * panel, panel + 40), (200, 200, 200), 1)
+            cv2.line(canvas, (0, 0), (0, panel + 40), (200, 200, 200), 1)
+        panels.append(canvas)
+    canvas = np.hstack(panels)
     s = plan.summary
     if s:
         text = (f"{s.get('pattern', '')}  length {s.get('total_length_m', 0):.0f} m  time "
                 f"{s.get('total_time_s', 0) / 60:.1f} min  photos {s.get('photos', 0)}  min clearance "
                 f"{s.get('min_clearance_m', 0):.2f} m")
-        cv2.putText(canvas, text, (3 * panel // 3 + 10, panel + 30), cv2.FONT_HERSHEY_SIMPLEX, 0.5,
+        cv2.rectangle(canvas, (0, panel + 16), (3 * panel, panel + 40), (255, 255, 255), -1)
+        cv2.putText(canvas, text, (10, panel + 34), cv2.FONT_HERSHEY_SIMPLEX, 0.5,
                     (0, 0, 0), 1, cv2.LINE_AA)
     return canvas

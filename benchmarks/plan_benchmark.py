@@ -1,0 +1,124 @@
+"""Planner figures: planning time for 1, 10 and 100 turbines, and the adaptive plan beside the
+fixed, non-adaptive pattern that assumes the rotor stopped in a "Y" (blade 1 up), over random
+real stop angles.
+
+    python benchmarks/plan_benchmark.py [--cases 30] [--sizes 1,10,100] [--out results.json]
+
+Coverage is the planner's prediction (the one coverage measure, wtcli/geometry/coverage.py) at the
+plan's GSD and incidence <= 60 deg, judged against the REAL rotor for both patterns; the fixed
+pattern's clearance is also judged against the real blades (its violations are counted).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from wtcli.errors import PlanError  # noqa: E402
+from wtcli.geometry import Camera, Turbine  # noqa: E402
+from wtcli.plan.config import Fleet, Mission, Settings  # noqa: E402
+from wtcli.plan.mission import plan_mission  # noqa: E402
+
+CAM = Camera(5456, 3632, 16, 23.2)
+
+
+def site(n: int, rng: np.random.Generator) -> Mission:
+    side = int(np.ceil(np.sqrt(n)))
+    ts = []
+    for i in range(n):
+        ts.append(Turbine.with_rotor_azimuth(
+            float(rng.uniform(0, 120)), id=f"T{i + 1}",
+            base=(400.0 * (i % side), 400.0 * (i // side), float(rng.uniform(0, 10))),
+            hub_height=80.0, rotor_diameter=90.0, yaw_deg=float(rng.uniform(0, 360))))
+    uavs = tuple(f"UAV{k + 1}" for k in range(max(1, n // 10)))
+    return Mission(tuple(ts), CAM, fleet=Fleet(uavs=uavs, launch=(-100.0, -100.0, 0.0)),
+                   settings=Settings(min_side_coverage=0.0))
+
+
+def timing(sizes: list[int]) -> list[dict]:
+    out = []
+    for n in sizes:
+        m = site(n, np.random.default_rng(n))
+        t0 = time.perf_counter()
+        plan = plan_mission(m)
+        dt = time.perf_counter() - t0
+        s = plan.summary
+        out.append({"turbines": n, "uavs": len(m.fleet.uavs), "seconds": round(dt, 2),
+                    "seconds_per_turbine": round(dt / n, 3), "waypoints": sum(len(r) for r in plan.routes),
+                    "photos": s["photos"], "length_km": round(s["total_length_m"] / 1000, 2),
+                    "mission_time_min": round(s["total_time_s"] / 60, 1),
+                    "min_clearance_m": round(s["min_clearance_m"], 2)})
+        print(f"{n:4d} turbines, {len(m.fleet.uavs)} UAV(s): {dt:6.2f} s "
+              f"({dt / n:.2f} s/turbine), {s['photos']} photos", flush=True)
+    return out
+
+
+def compare(cases: int) -> dict:
+    rng = np.random.default_rng(7)
+    rows = []
+    for i in range(cases):
+        t = Turbine.with_rotor_azimuth(float(rng.uniform(0, 360)), id="T1", base=(0, 0, 0),
+                                       hub_height=80.0, rotor_diameter=90.0,
+                                       yaw_deg=float(rng.uniform(0, 360)))
+        m = Mission((t,), CAM, settings=Settings(min_side_coverage=0.0))
+        row = {"stop_deg": round(t.azimuths_deg[0] % 120.0, 1)}
+        for pattern in ("adaptive", "fixed-y"):
+            try:
+                p = plan_mission(m, pattern=pattern)
+            except PlanError as e:
+                row[pattern] = {"error": str(e)}
+                continue
+            s = p.summary
+            c = s["predicted_coverage"]["T1"]
+            sides = [v for d in c["by_blade_side"].values() for v in d.values()]
+            row[pattern] = {"coverage": c["blade_average"], "min_side": min(sides),
+                            "length_m": s["total_length_m"], "time_s": s["total_time_s"],
+                            "min_clearance_m": s["min_clearance_m"],
+                            "violations": sum(s["violations"].values())}
+        rows.append(row)
+        a, f = row.get("adaptive", {}), row.get("fixed-y", {})
+        print(f"stop {row['stop_deg']:5.1f}: adaptive cov {a.get('coverage', float('nan')):.3f} "
+              f"(min side {a.get('min_side', float('nan')):.3f}) len {a.get('length_m', 0):.0f} | "
+              f"fixed-Y cov {f.get('coverage', float('nan')):.3f} len {f.get('length_m', 0):.0f} "
+              f"violations {f.get('violations', 0)} min clearance {f.get('min_clearance_m', 0):.2f}",
+              flush=True)
+
+    def agg(pattern: str) -> dict:
+        ok = [r[pattern] for r in rows if "error" not in r[pattern]]
+        if not ok:
+            return {}
+        cov = np.array([o["coverage"] for o in ok])
+        mins = np.array([o["min_side"] for o in ok])
+        return {"cases": len(ok), "coverage_mean": float(cov.mean()), "coverage_min": float(cov.min()),
+                "min_side_mean": float(mins.mean()), "min_side_min": float(mins.min()),
+                "share_cases_all_sides_ge_98": float((mins >= 0.98).mean()),
+                "length_m_mean": float(np.mean([o["length_m"] for o in ok])),
+                "time_min_mean": float(np.mean([o["time_s"] for o in ok]) / 60),
+                "cases_with_violations": int(sum(o["violations"] > 0 for o in ok)),
+                "min_clearance_m": float(min(o["min_clearance_m"] for o in ok))}
+    return {"adaptive": agg("adaptive"), "fixed-y": agg("fixed-y"), "rows": rows}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--cases", type=int, default=30)
+    ap.add_argument("--sizes", default="1,10,100")
+    ap.add_argument("--out", default=None)
+    a = ap.parse_args()
+    res = {"timing": timing([int(x) for x in a.sizes.split(",") if x]),
+           "adaptive_vs_fixed_y": compare(a.cases)}
+    summary = {k: v for k, v in res["adaptive_vs_fixed_y"].items() if k != "rows"}
+    print(json.dumps({"timing": res["timing"], **summary}, indent=1))
+    if a.out:
+        Path(a.out).write_text(json.dumps(res, indent=1))
+
+
+if __name__ == "__main__":
+    main()
