@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 
 from wtcli.geometry import Camera, Turbine
-from wtcli.synth.noise import fbm, noise_1d, smoothstep, tile_fbm
+from wtcli.synth.noise import bank_tile, fbm, noise_1d, smoothstep, tile_fbm
 from wtcli.synth.scene import Environment
 
 MAX_GROUND_M = 40000.0
@@ -167,8 +167,8 @@ def _background_lo(camera: Camera, env: Environment, turbine: Turbine, rng: np.r
 
     # Clouds on a plane ~2 km up; fade towards the horizon where they would alias.
     up = dz > 0.01
-    cloud_tile = tile_fbm(rng, 256, int(rng.integers(3, 7)), octaves=5, gain=0.55)
-    shade_tile = tile_fbm(rng, 256, int(rng.integers(4, 9)), octaves=4)
+    cloud_tile = bank_tile(rng, 256, int(rng.integers(3, 7)), octaves=5, gain=0.55)
+    shade_tile = bank_tile(rng, 256, int(rng.integers(4, 9)), octaves=4)
     hc, mpp = 2000.0, float(rng.uniform(20, 60))
     dzc = np.maximum(dz, 0.01)
     cx_, cy_ = dx / dzc * hc / mpp, dy / dzc * hc / mpp
@@ -219,14 +219,20 @@ def _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img
     # Land use: a 4-5 km tile at ~8 m per texel; fields as a patchwork of cells.
     T = 512
     mL = float(rng.uniform(6.0, 10.0))
-    sel = tile_fbm(rng, T, int(rng.integers(3, 8)), octaves=4)
+    sel = bank_tile(rng, T, int(rng.integers(3, 8)), octaves=4)
     land = np.zeros((T, T, 3), np.float32)
     k = len(base_cols)
     if env.ground == "fields":
-        n = int(rng.integers(6, 14))
-        cells = np.floor(np.mgrid[0:T, 0:T] / (T / n)).astype(np.int32)
-        jitter = tile_fbm(rng, T, 4, octaves=2)
-        idx = (cells[0] * 7 + cells[1] * 13 + (jitter * 3).astype(np.int32)) % k
+        # Fields: a rotated grid of plots of uneven size, their borders bent by noise.
+        n = float(rng.uniform(6, 16))
+        ang = float(rng.uniform(0, math.pi))
+        yy, xx = np.mgrid[0:T, 0:T].astype(np.float32)
+        warp = (bank_tile(rng, T, 4, octaves=2) - 0.5) * float(rng.uniform(0, 60))
+        a = (xx * math.cos(ang) + yy * math.sin(ang) + warp) / (T / n)
+        b = (-xx * math.sin(ang) + yy * math.cos(ang) + warp) / (T / n) * float(rng.uniform(0.4, 1.0))
+        ia, ib = np.floor(a).astype(np.int64), np.floor(b).astype(np.int64)
+        salt = int(rng.integers(1 << 20))
+        idx = ((((ia * 73856093) ^ (ib * 19349663) ^ salt) >> 5) % k).astype(np.int64)
         land = np.stack([np.asarray(base_cols)[idx][..., c] for c in range(3)], -1)
         land = land * (0.85 + 0.3 * sel[..., None])
     else:
@@ -236,10 +242,10 @@ def _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img
         i1 = np.minimum(i0 + 1, k - 1)
         bc = np.asarray(base_cols, np.float32)
         land = bc[i0] * (1 - f) + bc[i1] * f
-    bright = tile_fbm(rng, T, int(rng.integers(6, 14)), octaves=3)
+    bright = bank_tile(rng, T, int(rng.integers(6, 14)), octaves=3)
     land = land * (0.8 + 0.4 * bright[..., None])
     # 4th channel: how bushy the land is here (patches of dense scrub, bare slopes).
-    density = 0.25 + 0.75 * tile_fbm(rng, T, int(rng.integers(4, 12)), octaves=4)
+    density = 0.25 + 0.75 * bank_tile(rng, T, int(rng.integers(4, 12)), octaves=4)
     land = np.ascontiguousarray(np.dstack([land, density]).astype(np.float32))
     # Dirt roads and the gravel pad at the turbine's foot, drawn into the land tile.
     road = tuple(float(x) for x in _jitter(rng, (0.60, 0.70, 0.76), 0.04)) + (0.0,)
@@ -258,7 +264,9 @@ def _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img
                          cv2.LINE_AA, shift=4)
     pad = max(1, int(round(float(rng.uniform(12, 30)) / mL)))
     cv2.circle(land, (int(bx) % T, int(by) % T), pad, road, -1, cv2.LINE_AA)
-    land_blur = cv2.GaussianBlur(land, (0, 0), 3)
+    # The land as seen from far away (about a 4-texel blur), cheaply: shrink, then enlarge.
+    land_blur = cv2.resize(cv2.resize(land, (T // 4, T // 4), interpolation=cv2.INTER_AREA),
+                           (T, T), interpolation=cv2.INTER_LINEAR)
 
     # Bushes / trees: a tile of the bush bank at the scene's scale (bushes of ~1-6 m).
     tile = _bush_bank()[int(rng.integers(len(_bush_bank())))]

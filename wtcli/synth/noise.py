@@ -87,3 +87,33 @@ def noise_1d(rng: np.random.Generator, n: int, cells: int, octaves: int = 4,
 def smoothstep(e0: float, e1: float, x: np.ndarray) -> np.ndarray:
     t = np.clip((x - e0) / (e1 - e0), 0.0, 1.0)
     return t * t * (3 - 2 * t)
+
+
+_BANK: dict[tuple, list[np.ndarray]] = {}
+BANK_TILES = 3
+
+
+def bank_tile(rng: np.random.Generator, size: int, cells: int, octaves: int = 4,
+              gain: float = 0.5) -> np.ndarray:
+    """A tileable fractal noise tile like ``tile_fbm``, drawn from a small bank made once per
+    process from fixed seeds (cheap per scene; scenes stay pure functions of their seed): one of
+    the bank's tiles, cyclically shifted, possibly mirrored and transposed, all chosen by
+    ``rng``. Read-only view semantics are not relied on: the result is a fresh array."""
+    key = (int(size), int(cells), int(octaves), float(gain))
+    bank = _BANK.get(key)
+    if bank is None:
+        seed = [int(size), int(cells), int(octaves), int(gain * 1000)]
+        brng = np.random.default_rng(seed)
+        bank = [tile_fbm(brng, size, cells, octaves, gain) for _ in range(BANK_TILES)]
+        _BANK[key] = bank
+    t = bank[int(rng.integers(len(bank)))]
+    dy, dx = (int(v) for v in rng.integers(0, size, 2))
+    t = np.roll(t, (dy, dx), axis=(0, 1))
+    flip = int(rng.integers(8))
+    if flip & 1:
+        t = t[:, ::-1]
+    if flip & 2:
+        t = t[::-1]
+    if flip & 4:
+        t = t.T
+    return np.ascontiguousarray(t)

@@ -16,7 +16,10 @@ def camera_effects(img: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarra
     fx: dict[str, Any] = {}
     gain = float(rng.uniform(0.78, 1.22))
     gamma = float(rng.uniform(0.8, 1.25))
-    wb = (1.0 + rng.normal(0, 0.035, 3)).astype(np.float32)
+    # White balance errors run mostly along blue-amber (colour temperature), a little along
+    # green-magenta (tint).
+    temp, tint = float(rng.normal(0, 0.045)), float(rng.normal(0, 0.012))
+    wb = np.array([1 + temp, 1 + tint, 1 - temp], np.float32)
     fx.update(exposure=gain, gamma=gamma, white_balance=wb.tolist())
     # Bloom: light from the sun and bright sky bleeds over nearby edges (thin blades too).
     if rng.random() < 0.5:
@@ -33,8 +36,8 @@ def camera_effects(img: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarra
     idx = np.clip(img * (gain * wb * 1024.0), 0, 2048).astype(np.int32)
     img = curve[idx]
     sat = float(rng.uniform(0.75, 1.25))
-    grey = img.mean(axis=2, keepdims=True)
-    img = grey + (img - grey) * sat
+    grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+    img = cv2.addWeighted(img, sat, cv2.merge([grey, grey, grey]), 1.0 - sat, 0.0)
     fx["saturation"] = sat
     if rng.random() < 0.4:
         vs, us = np.ogrid[0:H, 0:W]
@@ -61,7 +64,9 @@ def camera_effects(img: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarra
     sigma = float(rng.uniform(0.0, 0.018))
     if sigma > 0.002:
         noise = rng.standard_normal((H, W, 1), dtype=np.float32) * np.float32(sigma)
-        chroma = rng.standard_normal((H, W, 3), dtype=np.float32) * np.float32(sigma * 0.4)
+        # Chroma noise is blotchier than luma noise: draw it at half resolution.
+        chroma = rng.standard_normal(((H + 1) // 2, (W + 1) // 2, 3), dtype=np.float32)
+        chroma = cv2.resize(chroma, (W, H), interpolation=cv2.INTER_LINEAR) * np.float32(sigma * 0.5)
         img = img + noise + chroma
     fx["noise_sigma"] = sigma
     out = np.clip(img * 255.0 + 0.5, 0, 255).astype(np.uint8)

@@ -88,14 +88,15 @@ def render_sample(seed: int, width: int = 640, height: int = 480,
     zenith, horizon = sky_colours(scene.env, rng)
     bg = render_background(cam, scene.env, scene.turbine, rng, zenith, horizon)
     bg = _distractors(bg, scene, rng)
+    bg = _buildings(bg, scene, rng, horizon)
 
     turbines = (scene.turbine,) + scene.others
-    colour, parts = _render_turbines(turbines, scene, rng, zenith, horizon)
+    colour, (parts, boxes) = _render_turbines(turbines, scene, rng, zenith, horizon)
     premult, alpha = colour
     img = premult + bg * (1.0 - alpha[..., None])
     image, effects = camera_effects(img.astype(np.float32), rng)
 
-    instances, owners = _instances(parts, turbines, width, height)
+    instances, owners = _instances(parts, boxes, turbines, width, height)
     truth = _truth(seed, scene, instances, owners, effects)
     return SynthSample(image=image, instances=instances, truth=truth)
 
@@ -170,7 +171,14 @@ def _render_turbines(turbines, scene: Scene, rng, zenith, horizon):
     alpha = cv2.resize(inside.astype(np.float32), (W, H), interpolation=cv2.INTER_AREA)
     part2 = np.full((H * ss, W * ss), -1, np.int32)
     part2[inside] = proj.face_part[ids[inside]]
-    return (premult, alpha), part2
+    # Each part's box on the supersampled canvas, from its faces' corners (masks are cut there).
+    n_parts = int(mesh.face_part.max()) + 1
+    lo = np.full((n_parts, 2), np.inf)
+    hi = np.full((n_parts, 2), -np.inf)
+    np.minimum.at(lo, proj.face_part, proj.uv.min(axis=1))
+    np.maximum.at(hi, proj.face_part, proj.uv.max(axis=1))
+    boxes = np.concatenate([np.floor(lo) - 2, np.ceil(hi) + 2], axis=1)
+    return (premult, alpha), (part2, boxes)
 
 
 def _shade(turbines, owner, local, centroid, normal, to_cam, depth, env, rng, zenith, horizon):
@@ -225,7 +233,7 @@ def _shade(turbines, owner, local, centroid, normal, to_cam, depth, env, rng, ze
     return col.astype(np.float32)
 
 
-def _instances(part2: np.ndarray, turbines, width: int, height: int):
+def _instances(part2: np.ndarray, boxes: np.ndarray, turbines, width: int, height: int):
     """Labelled masks at the output resolution: a pixel belongs to the part that covers most of
     it at the supersampled resolution, if that part covers at least half of it."""
     ss = SUPERSAMPLE
@@ -244,13 +252,27 @@ def _instances(part2: np.ndarray, turbines, width: int, height: int):
         gid += n + 2
     if not cand:
         return Instances.empty(height, width), []
-    cov = np.stack([cv2.resize((part2 == g).astype(np.float32), (width, height),
-                               interpolation=cv2.INTER_AREA) for g in cand])
-    best = np.argmax(cov, axis=0)
-    owned = np.take_along_axis(cov, best[None], 0)[0] >= 0.5
+    best = np.zeros((height, width), np.float32)
+    best_i = np.full((height, width), -1, np.int32)
+    for i, g in enumerate(cand):
+        # Work inside the part's box, on whole output pixels (ss x ss blocks).
+        x0, y0, x1, y1 = boxes[g]
+        x0 = int(np.clip(np.floor(x0 / ss), 0, width))
+        y0 = int(np.clip(np.floor(y0 / ss), 0, height))
+        x1 = int(np.clip(np.ceil(x1 / ss), 0, width))
+        y1 = int(np.clip(np.ceil(y1 / ss), 0, height))
+        if x1 <= x0 or y1 <= y0:
+            continue
+        block = part2[y0 * ss:y1 * ss, x0 * ss:x1 * ss] == g
+        c = block.reshape(y1 - y0, ss, x1 - x0, ss).mean(axis=(1, 3), dtype=np.float32)
+        b, bi = best[y0:y1, x0:x1], best_i[y0:y1, x0:x1]
+        win = c > b  # ties keep the earlier part
+        b[win] = c[win]
+        bi[win] = i
+    best_i[best < 0.5] = -1
     labels, masks, owners = [], [], []
     for i, (label, owner) in enumerate(info):
-        m = owned & (best == i)
+        m = best_i == i
         if int(m.sum()) >= minpix:
             labels.append(label)
             masks.append(m)
@@ -296,6 +318,65 @@ def _truth(seed, scene: Scene, instances: Instances, owners, effects) -> dict[st
         "environment": scene.env.to_dict(),
         "camera_effects": effects,
     }
+
+
+def _buildings(bg: np.ndarray, scene: Scene, rng, horizon: np.ndarray) -> np.ndarray:
+    """A few white, grey or beige boxes (substations, farm houses) on the ground beyond the
+    turbine: bright blocky shapes that are not nacelles. Always farther from the camera than
+    the turbine's foot, so painting them under the turbines keeps occlusion right."""
+    if rng.random() > 0.45:
+        return bg
+    cam, t, env = scene.camera, scene.turbine, scene.env
+    out = bg.copy()
+    L = sun_direction(env)
+    d_t = float(np.linalg.norm(t.base_xyz[:2] - cam.position[:2]))
+    boxes = []
+    for _ in range(int(rng.integers(1, 7))):
+        if rng.random() < 0.5:  # near the turbine's foot (substation, storage)
+            c = t.base_xyz[:2] + rng.uniform(-250, 250, 2)
+        else:  # farther off, in view
+            fwd = cam.forward[:2] / max(float(np.linalg.norm(cam.forward[:2])), 1e-6)
+            ang = math.atan2(fwd[0], fwd[1]) + float(rng.uniform(-0.7, 0.7))
+            c = cam.position[:2] + (d_t + float(rng.uniform(50, 1500))) * np.array(
+                [math.sin(ang), math.cos(ang)])
+        if float(np.linalg.norm(c - cam.position[:2])) < d_t + 25 or \
+                float(np.linalg.norm(c - t.base_xyz[:2])) < t.tower_base_radius + 12:
+            continue
+        size = np.array([rng.uniform(5, 22), rng.uniform(5, 30), rng.uniform(3, 8)])
+        yaw = float(rng.uniform(0, math.pi))
+        tone = np.clip(np.array([0.85, 0.86, 0.88]) * float(rng.uniform(0.7, 1.05))
+                       + rng.normal(0, 0.04, 3), 0, 1)
+        if rng.random() < 0.3:
+            tone = tone * np.array([0.75, 0.88, 0.95])  # beige
+        boxes.append((float(np.linalg.norm(c - cam.position[:2])), c, size, yaw, tone))
+    for dist, c, size, yaw, tone in sorted(boxes, key=lambda b: -b[0]):
+        ax = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+        ay = np.array([-math.sin(yaw), math.cos(yaw), 0.0])
+        az = np.array([0.0, 0.0, 1.0])
+        centre = np.array([c[0], c[1], size[2] / 2])
+        faces = []
+        for axis, half, others in ((ax, size[0] / 2, (ay * size[1] / 2, az * size[2] / 2)),
+                                   (ay, size[1] / 2, (ax * size[0] / 2, az * size[2] / 2)),
+                                   (az, size[2] / 2, (ax * size[0] / 2, ay * size[1] / 2))):
+            for sign in (1.0, -1.0):
+                n = sign * axis
+                fc = centre + n * half
+                if n @ (cam.position - fc) <= 0 or (n[2] < 0):
+                    continue
+                u, v = others
+                quad = np.array([fc - u - v, fc + u - v, fc + u + v, fc - u + v])
+                uv, z = cam.project(quad)
+                if (z <= 1).any():
+                    continue
+                shade = 0.45 + 0.3 * (0.5 + 0.5 * n[2]) + 0.5 * env.sun_strength * max(float(n @ L), 0)
+                col = tone * shade
+                fog = 1.0 - math.exp(-dist / env.visibility_m)
+                col = col * (1 - fog) + horizon * fog
+                faces.append((uv, col))
+        for uv, col in faces:
+            cv2.fillConvexPoly(out, np.round(uv * 16).astype(np.int32),
+                               tuple(float(x) for x in col), cv2.LINE_AA, 4)
+    return out
 
 
 def _distractors(bg: np.ndarray, scene: Scene, rng) -> np.ndarray:

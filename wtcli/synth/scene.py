@@ -119,7 +119,7 @@ def _sample_fill(rng: np.random.Generator) -> float:
         return float(rng.uniform(0.15, 0.35))  # small, whole turbine and surroundings
     if u < 0.72:
         return float(rng.uniform(0.35, 0.95))  # the rotor well inside the frame
-    return float(rng.uniform(0.95, 2.4))  # close: blades cut by the frame
+    return float(rng.uniform(0.95, 3.0))  # close: blades cut by the frame
 
 
 def sample_scene(rng: np.random.Generator, width: int, height: int, view: str | None) -> Scene:
