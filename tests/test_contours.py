@@ -209,3 +209,15 @@ def test_cli_wrong_json_is_one_line(cli, tmp_path, content, code, msg):
 def test_cli_missing_and_negative_threshold(cli, tmp_path):
     assert cli("contours", tmp_path / "nope.json").exit_code == 3
     assert cli("contours", tmp_path / "nope.json", "--area-threshold", "-1").exit_code == 2
+
+
+def test_cli_mask_pngs(cli, tmp_path):
+    inst = three_parts()
+    for name, k in (("blade.png", 0), ("tower.png", 1), ("nacelle.png", 2)):
+        cv2.imwrite(str(tmp_path / name), inst.masks[k].astype(np.uint8) * 255)
+    r = cli("contours", tmp_path / "blade.png", tmp_path / "tower.png", tmp_path / "nacelle.png",
+            "--area-threshold", "4", "--json")
+    assert r.exit_code == 0, r.stderr
+    img, = json.loads(r.stdout)["images"]
+    assert [i["label"] for i in img["instances"]] == ["blade", "tower", "nacelle"]
+    assert img["image_size"] == [60, 80] and img["dropped"] == 1
