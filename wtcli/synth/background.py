@@ -348,13 +348,18 @@ def _hills(camera, env, rng, dz, elev, az, horizon, img):
         mask = (elev < r) & (ground_dist > D)
         if not mask.any():
             continue
-        cols = _LAND["scrub" if env.ground != "forest" else "forest"][0]
-        base = _jitter(rng, cols[int(rng.integers(len(cols)))], 0.03) * 0.8
+        # Vegetated ridges: mostly bush colour over soil, darker than the plain in front.
+        soils, bush = _LAND["scrub" if env.ground != "forest" else "forest"]
+        soil = np.asarray(soils[int(rng.integers(len(soils)))], np.float32)
+        base = _jitter(rng, 0.65 * np.asarray(bush, np.float32) + 0.35 * soil, 0.02)
+        base = base * float(rng.uniform(0.7, 1.1)) * (0.6 + 0.5 * env.sun_strength)
         H, W = dz.shape
         tex = fbm(rng, H, W, float(rng.uniform(20, 60)), octaves=4)
-        col = base * (0.7 + 0.6 * tex[..., None])
-        fog = 1.0 - math.exp(-D / env.visibility_m)
-        col = col * (1 - fog) + horizon * fog * np.array([1.0, 0.98, 0.96], np.float32)
+        # Slopes facing the sun are lighter: a soft gradient down from the ridge line.
+        col = base * (0.75 + 0.5 * tex[..., None])
+        # Aerial perspective: distant land takes on the bluish haze of the horizon.
+        fog = 1.0 - math.exp(-D / (0.8 * env.visibility_m))
+        col = col * (1 - fog) + horizon * fog * np.array([1.04, 0.98, 0.92], np.float32)
         # Antialias the ridge line.
         a = smoothstep(0.0, 0.08, r - elev) * mask
         img = img * (1 - a[..., None]) + col * a[..., None]

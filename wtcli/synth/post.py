@@ -61,7 +61,7 @@ def camera_effects(img: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarra
         k /= max(k.sum(), 1e-6)
         img = cv2.filter2D(img, -1, k)
         fx["blur"] = {"kind": "motion", "length_px": n, "angle_deg": ang}
-    sigma = float(rng.uniform(0.0, 0.018))
+    sigma = float(rng.uniform(0.0, 0.012))
     if sigma > 0.002:
         noise = rng.standard_normal((H, W, 1), dtype=np.float32) * np.float32(sigma)
         # Chroma noise is blotchier than luma noise: draw it at half resolution.

@@ -136,7 +136,11 @@ def sample_scene(rng: np.random.Generator, width: int, height: int, view: str | 
     dist = turbine.rotor_diameter * cam0.fx / (fill * height)
     hub = turbine.hub_center
     # Camera height: drones fly from a little below to well above the hub; never too low.
-    elev = float(rng.uniform(-25.0, 20.0)) if rng.random() < 0.88 else float(rng.uniform(20, 45))
+    # Mostly at or above the hub looking slightly down (the ground behind the turbine), as
+    # inspection flights do; sometimes from well below.
+    u = rng.random()
+    elev = float(rng.uniform(-10.0, 25.0)) if u < 0.75 else (
+        float(rng.uniform(-25.0, -10.0)) if u < 0.9 else float(rng.uniform(25.0, 45.0)))
     heading = math.radians(turbine.yaw_deg + offset)
     horiz = np.array([math.sin(heading), math.cos(heading), 0.0])
     pos = hub + dist * (math.cos(math.radians(elev)) * horiz
@@ -158,7 +162,7 @@ def sample_scene(rng: np.random.Generator, width: int, height: int, view: str | 
     dx = float(rng.uniform(-spread, spread)) * fw
     dy = float(rng.uniform(-spread, spread * 0.7)) * fh
     target = hub + dx * look0.right - dy * look0.down
-    if rng.random() < 0.25:  # look down more: tower and ground below the rotor in the frame
+    if rng.random() < 0.4:  # look down more: tower and ground below the rotor in the frame
         target = target - np.array([0, 0, 1.0]) * float(rng.uniform(0.1, 0.45)) * fh
     camera = cam0.looking_at(pos, target, roll_deg=roll)
 
