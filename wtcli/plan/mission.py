@@ -17,6 +17,8 @@ the summary, not raised).
 from __future__ import annotations
 
 import math
+import os
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from functools import lru_cache
 
@@ -106,7 +108,7 @@ def turbine_chunks(t: Turbine, site: Site, pp: PassParams, mission: Mission,
     z = zone(t, ex.measured_tips)
     sp = initial_point(t, z)
     k = 0
-    while site.clearance(sp[None], pp.required + 1)[0] < pp.required and k < 50:  # push S_p out until it is clear
+    while site.clearance(sp[None], pp.required)[0] < pp.required and k < 50:  # push S_p out until it is clear
         sp = sp + t.axis * 2.0
         k += 1
     chunks = [Chunk(t.id, "overview", [WP(sp, _unit(z.center - sp), True, f"{t.id}/overview")])]
@@ -294,8 +296,8 @@ def check_routes(routes: list[Route], site: Site, launch: np.ndarray, safe: floa
     out = {"min_clearance_m": float("inf"), "waypoint_violations": 0, "leg_violations": 0,
            "ground_violations": 0, "first_violation": None}
     for r in routes:
-        c = site.clearance(r.pos, safe + 5.0)
-        lb = site.segment_clearance(r.pos[:-1], r.pos[1:], 0.5, safe + 5.0)
+        c = site.clearance(r.pos, safe + 1.0)
+        lb = site.segment_clearance(r.pos[:-1], r.pos[1:], 0.5, safe + 1.0)
         out["min_clearance_m"] = min(out["min_clearance_m"], float(c.min()), float(lb.min()))
         bad_w = np.nonzero(c < safe)[0]
         bad_l = np.nonzero(lb < safe)[0]
@@ -345,14 +347,64 @@ def _blade_coverage_from_chunks(t: Turbine, chunks: list[Chunk], camera: Camera,
                             max_incidence)
 
 
+# ---- per-turbine work (run in worker processes for large sites) ----------------------------------------
+def _tour(job: tuple) -> list[Chunk]:
+    t, site, pp, mission, pattern, gsd_eval = job
+    s = mission.settings
+    chunks = turbine_chunks(t, site, pp, mission)
+    if pattern == "adaptive":
+        cov = _blade_coverage_from_chunks(t, chunks, mission.camera, gsd_eval,
+                                          s.coverage_spacing_m, s.max_incidence_deg)
+        split: dict[int, set[str]] = {}
+        for b, sides in cov.by_blade_side().items():
+            low = {side for side, v in sides.items() if v < SPLIT_BELOW}
+            if low:
+                split[int(b[5:]) - 1] = low
+        if split:
+            chunks = turbine_chunks(t, site, pp, mission, split, previous=chunks)
+    return chunks
+
+
+def _photos_of(t: Turbine, routes: list[Route]) -> tuple[np.ndarray, np.ndarray]:
+    pos, rot = [], []
+    prefix = f"{t.id}/"
+    for r in routes:
+        sel = np.nonzero(r.photo & np.array([str(c).startswith(prefix) for c in r.component]))[0]
+        for i in sel:
+            pos.append(r.pos[i])
+            rot.append(_rotation(round(float(r.yaw_deg[i]), 6), round(float(r.gimbal_pitch_deg[i]), 6)))
+    return np.array(pos).reshape(-1, 3), np.array(rot).reshape(-1, 3, 3)
+
+
+def _side_coverage(job: tuple) -> tuple[dict, float, float]:
+    t, (pos, rot), camera, gsd, spacing, incidence = job
+    cov = measure_coverage(t.surface_samples(spacing), camera, pos, rot, gsd, incidence)
+    return cov.by_blade_side(), cov.blade_average(), cov.structure_fraction()
+
+
+def _map(fn, jobs: list, workers: int | None) -> list:
+    if workers is None:
+        workers = (os.cpu_count() or 1) if len(jobs) >= 8 else 1
+    workers = max(1, min(workers, len(jobs)))
+    if workers == 1:
+        return [fn(j) for j in jobs]
+    import multiprocessing as mp
+
+    with ProcessPoolExecutor(workers, mp_context=mp.get_context("fork")) as ex:
+        return list(ex.map(fn, jobs, chunksize=max(1, len(jobs) // (4 * workers))))
+
+
 # ---- the planner -----------------------------------------------------------------------------------------
 def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = None,
-                 pattern: str = "adaptive", enforce_safety: bool | None = None) -> Plan:
+                 pattern: str = "adaptive", enforce_safety: bool | None = None,
+                 workers: int | None = None) -> Plan:
     """Plan every turbine of ``mission`` for its fleet; see the module docstring.
 
     azimuths: turbine id -> blade rotor azimuths (deg), overriding the YAML.
     enforce_safety: raise PlanError on any clearance/ground violation or coverage shortfall
-    (default: True for "adaptive", False for the "fixed-y" baseline, which reports them)."""
+    (default: True for "adaptive", False for the "fixed-y" baseline, which reports them).
+    workers: processes for the per-turbine work (default: one per CPU from 8 turbines on; the
+    result does not depend on it)."""
     if pattern not in PATTERNS:
         raise ConfigError(f"pattern: expected one of {', '.join(PATTERNS)}, got {pattern!r}")
     if enforce_safety is None:
@@ -381,18 +433,8 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
     # Component trajectories per turbine (adaptive: split flat sides that a single pass misses).
     tours: dict[str, list[Chunk]] = {}
     notes: list[str] = []
-    for t in assumed:
-        chunks = turbine_chunks(t, site_plan, pp, mission)
-        if pattern == "adaptive":
-            cov = _blade_coverage_from_chunks(t, chunks, mission.camera, gsd_eval,
-                                              s.coverage_spacing_m, s.max_incidence_deg)
-            split: dict[int, set[str]] = {}
-            for b, sides in cov.by_blade_side().items():
-                low = {side for side, v in sides.items() if v < SPLIT_BELOW}
-                if low:
-                    split[int(b[5:]) - 1] = low
-            if split:
-                chunks = turbine_chunks(t, site_plan, pp, mission, split, previous=chunks)
+    jobs = [(t, site_plan, pp, mission, pattern, gsd_eval) for t in assumed]
+    for t, chunks in zip(assumed, _map(_tour, jobs, workers)):
         tours[t.id] = chunks
         notes += [n for c in chunks for n in c.notes]
 
@@ -422,14 +464,13 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
                         f"{s.safe_distance_m:g} m)")
 
     coverage = {}
-    for t in real:
-        cov = predict_coverage(t, routes, mission.camera, gsd_eval, s.coverage_spacing_m,
-                               s.max_incidence_deg)
-        sides = cov.by_blade_side()
+    sides_all = _map(_side_coverage, [(t, _photos_of(t, routes), mission.camera, gsd_eval,
+                                       s.coverage_spacing_m, s.max_incidence_deg) for t in real],
+                     workers)
+    for t, (sides, average, structure) in zip(real, sides_all):
         vals = [v for d in sides.values() for v in d.values()]
-        coverage[t.id] = {"by_blade_side": sides, "blade_average": cov.blade_average(),
-                          "min_side": float(min(vals)) if vals else 0.0,
-                          "structure": cov.structure_fraction()}
+        coverage[t.id] = {"by_blade_side": sides, "blade_average": average,
+                          "min_side": float(min(vals)) if vals else 0.0, "structure": structure}
         if enforce_safety and vals and min(vals) < s.min_side_coverage:
             worst = min(((b, side, v) for b, d in sides.items() for side, v in d.items()),
                         key=lambda x: x[2])

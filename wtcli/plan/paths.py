@@ -96,7 +96,7 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
     in one vectorised call; the first, i.e. shortest push, that clears wins). None if none does.
     """
     p, q = np.asarray(p, float), np.asarray(q, float)
-    cap = leg_required + 1.0
+    cap = leg_required + 0.5 * LEG_STEP  # legs subtract up to half a step of sampling slack
     if site.segment_clearance(p[None], q[None], LEG_STEP, cap)[0] >= leg_required:
         return []
     dirs = list(hints or [])
@@ -219,7 +219,7 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
         sc, sn = SIDE_DIRS[side]
         g0 = math.atan2(sn, sc)
         pos0, fwd0 = _side_points(turbine, k, S, np.full(len(S), g0), np.full(len(S), pp.standoff))
-        clear0 = site.clearance(pos0, pp.required + 1.0)
+        clear0 = site.clearance(pos0, pp.required)
         ground = site.ground_z(pos0) + pp.min_altitude
         blocked = (clear0 < pp.required) | (pos0[:, 2] < ground)
         forced = side in split_sides
@@ -240,7 +240,7 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
             J, AL, EX = np.meshgrid(jj, alphas, np.array(closer + extra), indexing="ij")
             J, AL, EX = J.ravel(), AL.ravel(), EX.ravel()
             cp, cf = _side_points(turbine, k, S[J], g0 + sign * AL, pp.standoff + EX)
-            ok = (site.clearance(cp, pp.required + 1.0) >= pp.required) & \
+            ok = (site.clearance(cp, pp.required) >= pp.required) & \
                 (cp[:, 2] >= site.ground_z(cp) + pp.min_altitude)
             per = len(alphas) * len(closer + extra)
             okm = ok.reshape(len(jj), per)
@@ -334,7 +334,7 @@ def _join(wps: list[WP], q: np.ndarray, q_fwd: np.ndarray, turbine: Turbine, k: 
         radius = max(rp, rq)
         spans = [s_arc] + [x for x in np.arange(s_arc + 2.0, s_end + 0.1, 2.0)]
         if s_arc > s_end - 2.0:  # at the tip: go round beyond it too
-            spans += [s_end + pp.required + 1.0]
+            spans += [s_end + pp.required]
         cands = []
         for long_way in (False, True):
             for s in spans:
@@ -357,11 +357,11 @@ def _join(wps: list[WP], q: np.ndarray, q_fwd: np.ndarray, turbine: Turbine, k: 
                 pts += vias
                 pown += [i] * len(vias)
             good = np.ones(len(batch), bool)
-            lb = site.segment_clearance(np.array(legs0), np.array(legs1), LEG_STEP, pp.required + 1)
+            lb = site.segment_clearance(np.array(legs0), np.array(legs1), LEG_STEP, pp.required)
             np.logical_and.at(good, np.array(owner), lb >= pp.leg_required)
             if pts:
                 P = np.array(pts)
-                okp = (site.clearance(P, pp.required + 1) >= pp.required) & \
+                okp = (site.clearance(P, pp.required) >= pp.required) & \
                     (P[:, 2] >= site.ground_z(P) + pp.min_altitude)
                 np.logical_and.at(good, np.array(pown), okp)
             if good.any():
@@ -381,7 +381,7 @@ class _Blocked(Exception):
 
 # ---- nacelle and tower (fixed) ------------------------------------------------------------------------
 def _filter_stations(site: Site, pp: PassParams, pos: np.ndarray) -> np.ndarray:
-    ok = site.clearance(pos, pp.required + 1) >= pp.required
+    ok = site.clearance(pos, pp.required) >= pp.required
     ok &= pos[:, 2] >= site.ground_z(pos) + pp.min_altitude
     return ok
 
@@ -457,7 +457,7 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
                                                          prev[2] - turbine.base_xyz[2]])
                             for s in range(1, steps)]).reshape(-1, 3)
             if len(arc):
-                arc = arc[site.clearance(arc, pp.required + 1) >= pp.required]
+                arc = arc[site.clearance(arc, pp.required) >= pp.required]
             new += [WP(v, None, False, comp) for v in arc]
         new += [WP(p, f, True, comp) for p, f in zip(pos[keep], fwd[keep])]
         append_chain(chunk, site, pp, new, droppable=True)
@@ -473,13 +473,13 @@ def append_chain(chunk: Chunk, site: Site, pp: PassParams, new: list[WP],
     pts = np.array(([chunk.wps[-1].pos] if chunk.wps else []) + [w.pos for w in new])
     bad = np.zeros(len(new), bool)
     if len(pts) > 1:
-        lb = site.segment_clearance(pts[:-1], pts[1:], LEG_STEP, pp.required + 1)
+        lb = site.segment_clearance(pts[:-1], pts[1:], LEG_STEP, pp.required)
         bad[len(new) - len(lb):] = lb < pp.leg_required
     dropped = False
     for w, b in zip(new, bad):
         if dropped and chunk.wps:  # the previous station was left out: check this leg afresh
             prev = chunk.wps[-1].pos
-            b = site.segment_clearance(prev[None], w.pos[None], LEG_STEP, pp.required + 1)[0] \
+            b = site.segment_clearance(prev[None], w.pos[None], LEG_STEP, pp.required)[0] \
                 < pp.leg_required
         dropped = False
         if b:

@@ -55,18 +55,25 @@ class Site:
 
     def _turbine_clearance(self, t: Turbine, P: np.ndarray, cap: float) -> np.ndarray:
         out = np.full(len(P), np.inf)
-        # Blades: inside the capsule around the axis with the largest semi-axis as radius.
-        a_max = 0.5 * max(t.blade_root_chord, t.blade_max_chord, t.blade_tip_chord)
+        # Blades: each section lies inside the circle of its chord semi-axis A(f); with the
+        # model's taper factor, (radius - A(f)) * taper_cos is a lower bound of the distance that
+        # is never above Turbine.clearance (the ellipse distance is at least radius - A).
         s0, s1 = t.blade_root_offset, t.tip_radius
         hc = t.hub_center
+        tc = t._blade_taper_cos()
+        q = P - hc
         for k in range(t.n_blades):
             d = t.blade_direction(k)
-            q = P - hc
-            s = np.clip(q @ d, s0, s1)
-            bound = np.linalg.norm(q - s[:, None] * d, axis=1) - a_max
+            s = q @ d
+            sc = np.clip(s, s0, s1)
+            rho = np.linalg.norm(q - s[:, None] * d, axis=1)
+            A, _ = t.blade_semi_axes((sc - s0) / (s1 - s0))
+            beyond = np.maximum(s - s1, 0.0) + np.maximum(s0 - s, 0.0)
+            bound = np.hypot(np.maximum(rho - A, 0.0) * tc, beyond)
             exact = bound < cap
-            val = np.maximum(bound, 0.0)
+            val = bound
             if exact.any():
+                val = bound.copy()
                 val[exact] = t._blade_distance(P[exact], k)
             out = np.minimum(out, val)
         # Tower: inside the cylinder of its base radius; nacelle and hub are cheap.
