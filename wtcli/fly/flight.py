@@ -21,7 +21,7 @@ from wtcli.fly.scenario import Scenario
 from wtcli.fly.sim import G, Reference, Track, fly, make_reference
 from wtcli.fly.terrain import Ground
 from wtcli.fly.wind import make_wind
-from wtcli.geometry import BLADE_SIDES, Camera, Turbine
+from wtcli.geometry import Camera, Turbine
 from wtcli.geometry.coverage import Coverage, measure_coverage
 from wtcli.plan_file import Plan, Route
 
@@ -472,4 +472,4 @@ def fly_plan(plan: Plan, scn: Scenario, baselines: bool = False, fixed_plan: Pla
 
 
 __all__ = ["FLIGHT_KINDS", "FlightReport", "FlightResult", "UavFlight", "Violation", "fly_plan",
-           "fly_route", "measure", "path_deviation", "turbine_clearance", "BLADE_SIDES"]
+           "fly_route", "measure", "path_deviation", "turbine_clearance"]
