@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -46,16 +47,19 @@ def timing(sizes: list[int]) -> list[dict]:
     out = []
     for n in sizes:
         m = site(n, np.random.default_rng(n))
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), os.times()
         plan = plan_mission(m)
         dt = time.perf_counter() - t0
+        c1 = os.times()
+        cpu = (c1.user - c0.user) + (c1.children_user - c0.children_user)
         s = plan.summary
         out.append({"turbines": n, "uavs": len(m.fleet.uavs), "seconds": round(dt, 2),
+                    "cpu_seconds": round(cpu, 2), "cpus": os.cpu_count(),
                     "seconds_per_turbine": round(dt / n, 3), "waypoints": sum(len(r) for r in plan.routes),
                     "photos": s["photos"], "length_km": round(s["total_length_m"] / 1000, 2),
                     "mission_time_min": round(s["total_time_s"] / 60, 1),
                     "min_clearance_m": round(s["min_clearance_m"], 2)})
-        print(f"{n:4d} turbines, {len(m.fleet.uavs)} UAV(s): {dt:6.2f} s "
+        print(f"{n:4d} turbines, {len(m.fleet.uavs)} UAV(s): {dt:6.2f} s wall, {cpu:6.2f} s CPU "
               f"({dt / n:.2f} s/turbine), {s['photos']} photos", flush=True)
     return out
 

@@ -344,3 +344,12 @@ def test_cli_bad_inputs_exit_codes(cli, tmp_path):
     tight.write_text(SAMPLE.read_text().replace("battery_minutes: 30", "battery_minutes: 6"))
     r = cli("plan", tight)
     assert r.exit_code == 6 and "battery" in r.output
+
+
+def test_worker_processes_give_the_same_plan():
+    ts = tuple(make_turbine(az=25 * i, yaw=40 * i, tid=f"T{i + 1}", base=(250.0 * i, 0, 0))
+               for i in range(2))
+    m = Mission(ts, CAM, settings=Settings(inspect_tower=False, min_side_coverage=0.0))
+    a, b = plan_mission(m, workers=1), plan_mission(m, workers=2)
+    assert np.array_equal(a.routes[0].pos, b.routes[0].pos)
+    assert a.summary["predicted_coverage"] == b.summary["predicted_coverage"]
