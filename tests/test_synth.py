@@ -174,3 +174,17 @@ def test_tiny_images_render_cleanly(size):
         warnings.simplefilter("error")
         s = render_sample(5, *size)
     assert s.image.shape == (size[1], size[0], 3)
+
+
+def test_truth_lists_every_instance_and_distant_turbines_are_labelled():
+    found_distant = False
+    for seed in range(12):
+        s = render_sample(seed, W, H)
+        owners = s.truth["instances"]
+        assert len(owners) == len(s.instances)
+        for o, label in zip(owners, s.instances.labels):
+            assert (o["blade"] is not None) == (label == "blade")
+        main_blades = {o["blade"] for o in owners if o["turbine"] == 0 and o["blade"] is not None}
+        assert {b["index"] for b in s.truth["blades"] if b["visible"]} == main_blades
+        found_distant |= any(o["turbine"] > 0 for o in owners)
+    assert found_distant

@@ -23,7 +23,7 @@ import numpy as np
 from wtcli.geometry import Camera, Mesh, Turbine
 from wtcli.geometry.render import ProjectedMesh, paint, project_mesh
 from wtcli.jsonio import atomic_write_bytes, document, write_json
-from wtcli.masks import Instances, write_instances
+from wtcli.masks import CATEGORIES, INSTANCES_SCHEMA, INSTANCES_VERSION, Instances
 from wtcli.synth.background import render_background, sky_colours, sun_direction
 from wtcli.synth.noise import fbm
 from wtcli.synth.post import camera_effects
@@ -437,7 +437,8 @@ def render_dataset(out_dir: str | Path, count: int, seed: int, width: int = 640,
         raise ValueError(f"expected count >= 1, got {count}")
     _check_args(seed, width, height, view)
     out = Path(out_dir)
-    images, per_image, truth = [], [], {}
+    # Annotations are RLE-encoded image by image (a dataset's masks would not fit in memory).
+    images, anns, truth = [], [], {}
     views: dict[str, int] = {}
     n_inst = 0
 
@@ -451,7 +452,7 @@ def render_dataset(out_dir: str | Path, count: int, seed: int, width: int = 640,
                 raise RuntimeError("JPEG encoding failed")
             atomic_write_bytes(out / name, buf.tobytes())
             images.append({"id": i + 1, "file_name": name, "width": width, "height": height})
-            per_image.append(smp.instances)
+            anns.extend(smp.instances.annotations(i + 1, first_id=len(anns) + 1))
             truth[name] = smp.truth
             views[smp.truth["view"]] = views.get(smp.truth["view"], 0) + 1
             nonlocal n_inst
@@ -471,8 +472,10 @@ def render_dataset(out_dir: str | Path, count: int, seed: int, width: int = 640,
 
     params = {"count": count, "seed": seed, "width": width, "height": height,
               "view": view or "mixed"}
-    write_instances(out / "instances.json", images, per_image,
-                    extra={"synth": params})
+    # The same document as wtcli.masks.instances_document builds, from the encoded annotations.
+    body = {"info": {"description": "wtinspect instances"}, "licenses": [], "images": images,
+            "annotations": anns, "categories": CATEGORIES, "synth": params}
+    write_json(out / "instances.json", document(INSTANCES_SCHEMA, INSTANCES_VERSION, body))
     write_json(out / "ground_truth.json",
                document(TRUTH_SCHEMA, TRUTH_VERSION, {"params": params, "images": truth}))
     return {"out_dir": str(out), **params, "images": len(images), "instances": n_inst,
