@@ -32,6 +32,7 @@ from wtcli.plan.paths import (WP, Chunk, PassParams, _Blocked, blade_chunk, conn
                               nacelle_chunk, tower_chunk)
 from wtcli.plan.safety import Site
 from wtcli.plan.zone import initial_point, zone
+from wtcli.pitch import classify_theta
 from wtcli.plan_file import Plan, Route
 
 PATTERNS = ("adaptive", "fixed-y")
@@ -513,6 +514,8 @@ def _summary(routes: list[Route], mission: Mission, pattern: str, check: dict, c
         zones[t.id] = {"center": z.center.tolist(), "radius_m": z.radius,
                        "initial_point": initial_point(t, z).tolist(),
                        "azimuths_deg": list(t.azimuths_deg),
+                       # the paper's Fig. 4 class of each blade as a front photo shows it
+                       "tilt_classes": [classify_theta(a % 180.0) for a in t.azimuths_deg],
                        "azimuth_source": mission.extra(t.id).azimuth_source}
     s = mission.settings
     return {
