@@ -586,10 +586,10 @@ def load_pitch_input(paths: list[Path], area_threshold: float | None = None) -> 
         if not out:
             raise InputError(f"{first}: no images in the instances file")
         return out
-    if any(p.suffix.lower() in PHOTO_SUFFIXES for p in paths):
-        photo = next(p for p in paths if p.suffix.lower() in PHOTO_SUFFIXES)
-        raise InputError(f"{photo}: a photo; pitch reads masks, contours or instances "
-                         "(run `wtinspect segment` on it first)")
+    photos = [p for p in paths if is_photo(p)]
+    if photos:
+        return [photo_input(p, thr) for p in photos] if len(photos) == len(paths) else \
+            _mixed(photos[0])
     if all(p.suffix.lower() in MASK_SUFFIXES for p in paths):
         rec, inst = instances_from_mask_files(paths)
         try:
@@ -599,6 +599,30 @@ def load_pitch_input(paths: list[Path], area_threshold: float | None = None) -> 
             return [PitchInput(None, str(e), rec)]
     bad = next(p for p in paths if p.suffix.lower() not in MASK_SUFFIXES)
     raise InputError(f"{bad}: expected a contours or instances JSON, or mask PNG files")
+
+
+def is_photo(path: Path) -> bool:
+    """A photo rather than a mask: a .jpg/.jpeg/.webp, or an image file with colour in it."""
+    if path.suffix.lower() in PHOTO_SUFFIXES:
+        return True
+    if path.suffix.lower() in MASK_SUFFIXES and path.is_file():
+        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if img is not None and img.ndim == 3:
+            c = img[:, :, :3]
+            return not (np.array_equal(c[:, :, 0], c[:, :, 1])
+                        and np.array_equal(c[:, :, 1], c[:, :, 2]))
+    return False
+
+
+def photo_input(path: Path, area_threshold: float) -> PitchInput:
+    """One photo as pitch input. The segment stage plugs in here (segment -> find_contours);
+    until then a photo is refused with a hint."""
+    raise InputError(f"{path}: a photo; pitch reads masks, contours or instances "
+                     "(run `wtinspect segment` on it first)")
+
+
+def _mixed(photo: Path) -> list[PitchInput]:
+    raise InputError(f"{photo}: a photo among mask files; give photos or masks, not both")
 
 
 def _from_contours_file(path: Path, area_threshold: float | None) -> list[PitchInput]:
