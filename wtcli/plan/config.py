@@ -20,7 +20,7 @@ import yaml
 from wtcli.errors import ConfigError
 from wtcli.geometry import Camera, Turbine
 from wtcli.plan.geodesy import geodetic_to_enu
-from wtcli.yamlcheck import (check_keys, choice, load_yaml, need_mapping, number, string,
+from wtcli.yamlcheck import (check_keys, load_yaml, need_mapping, number, string,
                              vector)
 
 DEFAULTS_PATH = Path(__file__).resolve().parents[1] / "data" / "turbines-defaults.yaml"
