@@ -155,14 +155,51 @@ def _render_turbines(turbines, scene: Scene, rng, zenith, horizon):
     to_cam = to_cam[keep]
     normal = np.where(facing[:, None] < 0, -normal, normal)
 
-    col = _shade(turbines, face_owner[fi], face_local[fi], centroid, normal, to_cam,
-                 proj.depth, env, rng, zenith, horizon)
+    albedo, light = _shade(turbines, face_owner[fi], face_local[fi], centroid, normal, env, rng,
+                           zenith, horizon)
+    # Smooth (Gouraud) shading: light the vertices with normals averaged over the visible faces
+    # around them, interpolate across each face; paint colour (albedo) stays per face.
+    V = mesh.vertices
+    vidx = mesh.faces[fi]
+    vn = np.zeros_like(V)
+    np.add.at(vn, vidx.ravel(), np.repeat(normal, 3, axis=0))
+    vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-9)
+    used = np.unique(vidx)
+    vtc = cam.position - V[used]
+    vtc /= np.linalg.norm(vtc, axis=1, keepdims=True)
+    lv = np.zeros((len(V), 4), np.float32)
+    lv[used] = light(vn[used], vtc)
+    fog = (1.0 - np.exp(-proj.depth / env.visibility_m)).astype(np.float32)
 
     ids = np.full((H * ss, W * ss), -1, np.int32)
     paint(ids, proj, np.arange(len(fi)))
     inside = ids >= 0
     colour2 = np.zeros((H * ss, W * ss, 3), np.float32)
-    colour2[inside] = col[ids[inside]]
+    ys, xs = np.nonzero(inside)
+    f = ids[ys, xs]
+    # Barycentric coordinates of each pixel centre in its face (clamped for edge pixels).
+    a = proj.uv[:, 0]
+    e0, e1 = proj.uv[:, 1] - a, proj.uv[:, 2] - a
+    d00, d01, d11 = (e0 * e0).sum(1), (e0 * e1).sum(1), (e1 * e1).sum(1)
+    den = d00 * d11 - d01 * d01
+    inv = np.where(np.abs(den) > 1e-9, 1.0 / np.where(den == 0, 1.0, den), 0.0)
+    px = xs - a[f, 0]
+    py = ys - a[f, 1]
+    d20 = px * e0[f, 0] + py * e0[f, 1]
+    d21 = px * e1[f, 0] + py * e1[f, 1]
+    b1 = np.clip((d11[f] * d20 - d01[f] * d21) * inv[f], 0, 1).astype(np.float32)
+    b2 = np.clip((d00[f] * d21 - d01[f] * d20) * inv[f], 0, 1).astype(np.float32)
+    over = b1 + b2 > 1
+    b1[over], b2[over] = b1[over] / (b1 + b2)[over], b2[over] / (b1 + b2)[over]
+    flat = inv[f] == 0
+    b1[flat], b2[flat] = 1 / 3, 1 / 3
+    b0 = 1 - b1 - b2
+    vv = vidx[f]
+    lp = b0[:, None] * lv[vv[:, 0]] + b1[:, None] * lv[vv[:, 1]] + b2[:, None] * lv[vv[:, 2]]
+    sun_col = _sun_colour(env)
+    col = albedo[f] * lp[:, :3] + lp[:, 3:4] * sun_col
+    fo = fog[f][:, None]
+    colour2[ys, xs] = col * (1 - fo) + horizon * fo
     # Paint-like surface variation (dirt, erosion, uneven paint) in screen space, subtle.
     var = fbm(rng, H * ss // 4 + 1, W * ss // 4 + 1, 24, octaves=3)
     var = cv2.resize(var, (W * ss, H * ss), interpolation=cv2.INTER_LINEAR)
@@ -181,7 +218,14 @@ def _render_turbines(turbines, scene: Scene, rng, zenith, horizon):
     return (premult, alpha), (part2, boxes)
 
 
-def _shade(turbines, owner, local, centroid, normal, to_cam, depth, env, rng, zenith, horizon):
+def _sun_colour(env) -> np.ndarray:
+    return np.array([0.97, 0.99, 1.0], np.float32) if env.sky != "sunset" else \
+        np.array([0.6, 0.8, 1.0], np.float32)
+
+
+def _shade(turbines, owner, local, centroid, normal, env, rng, zenith, horizon):
+    """Paint colour per face (white paint, tip bands, nacelle stripe) and a lighting function
+    (normals, unit vectors to the camera) -> (M, 4): RGB light and specular strength."""
     F = len(owner)
     L = sun_direction(env)
     s = env.sun_strength
@@ -213,24 +257,25 @@ def _shade(turbines, owner, local, centroid, normal, to_cam, depth, env, rng, ze
                 stripe = on_side & (zr > 0.0) & (zr < 0.25) & (ar > -0.3) & (ar < 0.45)
                 colour = _LOGO_COLOURS[int(rng.integers(len(_LOGO_COLOURS)))]
                 albedo[np.nonzero(b)[0][stripe]] = colour
-    nz = normal[:, 2:3]
     # Ambient: the sky dome above, light bounced off the ground below. Under overcast skies the
     # dome is the only light and photos expose for it, so white paint still reads near white.
     sky_amb = (0.6 * horizon + 0.4 * zenith) * (0.62 + 0.55 * (1 - s)) * float(rng.uniform(0.9, 1.15))
     ground_amb = np.array([0.36, 0.44, 0.48], np.float32) * (0.5 + 0.3 * s)
-    amb = sky_amb * (0.5 + 0.5 * nz) + ground_amb * (0.5 - 0.5 * nz)
-    ndl = np.clip(normal @ L, 0, None)[:, None]
-    sun_col = np.array([0.97, 0.99, 1.0], np.float32) if env.sky != "sunset" else \
-        np.array([0.6, 0.8, 1.0], np.float32)
-    diffuse = ndl * s * sun_col * float(rng.uniform(0.7, 0.95))
-    h = L[None, :] + to_cam
-    h /= np.linalg.norm(h, axis=1, keepdims=True)
-    spec = float(rng.uniform(0.05, 0.3)) * s * np.clip(np.sum(normal * h, 1), 0, 1) ** float(
-        rng.uniform(12, 60))
-    col = albedo * (amb + diffuse) + spec[:, None] * sun_col
-    fog = 1.0 - np.exp(-depth / env.visibility_m)
-    col = col * (1 - fog[:, None]) + horizon * fog[:, None]
-    return col.astype(np.float32)
+    sun_col = _sun_colour(env)
+    kd = float(rng.uniform(0.7, 0.95))
+    ks = float(rng.uniform(0.05, 0.3))
+    shininess = float(rng.uniform(12, 60))
+
+    def light(n: np.ndarray, to_cam: np.ndarray) -> np.ndarray:
+        nz = n[:, 2:3]
+        amb = sky_amb * (0.5 + 0.5 * nz) + ground_amb * (0.5 - 0.5 * nz)
+        diffuse = np.clip(n @ L, 0, None)[:, None] * s * sun_col * kd
+        h = L[None, :] + to_cam
+        h /= np.linalg.norm(h, axis=1, keepdims=True)
+        spec = ks * s * np.clip(np.sum(n * h, 1), 0, 1) ** shininess
+        return np.concatenate([amb + diffuse, spec[:, None]], axis=1).astype(np.float32)
+
+    return albedo.astype(np.float32), light
 
 
 def _instances(part2: np.ndarray, boxes: np.ndarray, turbines, width: int, height: int):
