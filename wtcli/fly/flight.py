@@ -88,7 +88,7 @@ class FlightResult:
     coverage: dict[str, Coverage]  # per turbine id, from the photos taken
     planned_coverage: dict[str, Coverage] | None
     photo_gsd_mm: np.ndarray  # (P,) GSD at the nearest surface, per photo
-    energy_wh: dict[str, float]
+    energy_wh: dict[str, list[float]]  # per UAV, per sortie (split by landings)
     battery_wh: float
     notes: list[str] = field(default_factory=list)
 
@@ -138,8 +138,10 @@ class FlightResult:
             per_uav.append({"uav": u.uav, "photos": int(len(u.photo_step)),
                             "flight_time_s": float(u.track.t[-1] - u.track.t[0]),
                             "path_length_m": _length(u.track.pos),
-                            "energy_wh": self.energy_wh[u.uav],
-                            "battery_used_pct": 100.0 * self.energy_wh[u.uav] / self.battery_wh,
+                            "energy_wh": sum(self.energy_wh[u.uav]),
+                            "sorties": len(self.energy_wh[u.uav]),
+                            "battery_used_pct_per_sortie": [100.0 * e / self.battery_wh
+                                                            for e in self.energy_wh[u.uav]],
                             "wind": u.wind_summary})
         return {
             "kind": self.kind, "controller": self.controller,
@@ -160,9 +162,11 @@ class FlightResult:
                            "median": float(np.median(gsd)) if len(gsd) else None,
                            "max": float(gsd.max()) if len(gsd) else None,
                            "over_target": int((gsd > self.target_gsd_mm * 1.05).sum())}},
-            "battery": {"energy_wh": float(sum(self.energy_wh.values())),
-                        "capacity_wh_per_uav": self.battery_wh,
-                        "max_used_pct": 100.0 * max(self.energy_wh.values()) / self.battery_wh},
+            "battery": {"energy_wh": float(sum(sum(v) for v in self.energy_wh.values())),
+                        "capacity_wh": self.battery_wh,
+                        "sorties": int(sum(len(v) for v in self.energy_wh.values())),
+                        "max_used_pct": 100.0 * max(max(v) for v in self.energy_wh.values())
+                        / self.battery_wh},
             "uavs": per_uav, "notes": self.notes,
         }
 
@@ -185,7 +189,8 @@ def fly_route(route: Route, scn: Scenario, ground: Ground, uav_index: int, mode:
     flown = manual_route(route, scn.manual_pilot)[0] if mode == "pilot" else route
     c = scn.control
     ref = make_reference(flown.t, flown.pos, flown.yaw_deg, flown.gimbal_pitch_deg, dt,
-                         c.reference_smoothing_s, c.reference_accel_ms2, c.corner_deviation_m)
+                         c.reference_smoothing_s, c.reference_accel_ms2, c.corner_deviation_m,
+                         speed=flown.speed)
     n = len(ref.t)
     g_ref = ground.height(ref.pos)
     h_rep = float(np.median(ref.pos[:, 2] - g_ref))
@@ -282,14 +287,25 @@ def _episodes(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]))
 
 
-def _energy_wh(track: Track, scn: Scenario) -> float:
-    """Momentum-theory power: P = P_hover (|T| / g)^1.5 plus climb power m g v_z / eta."""
-    veh = scn.vehicle
+def _energy_wh(f: UavFlight, scn: Scenario, ground: Ground) -> list[float]:
+    """Energy of each sortie (Wh). Momentum-theory power, P = P_hover (|T| / g)^1.5 plus climb
+    power m g v_z / eta; zero while the vehicle stands on the ground (motors off: a battery
+    swap), which also separates the sorties."""
+    veh, track, ref = scn.vehicle, f.track, f.ref
     T = np.linalg.norm(track.thrust + np.array([0, 0, G]), axis=1)
     p = veh.hover_power_w * (T / G) ** 1.5
     p += veh.mass_kg * G * np.maximum(track.vel[:, 2], 0.0) / veh.propulsion_efficiency
     dt = float(track.t[1] - track.t[0]) if len(track.t) > 1 else 0.0
-    return float(p.sum() * dt / 3600.0)
+    ref_agl = ref.pos[:, 2] - ground.height(ref.pos)
+    landed = (ref_agl < 0.5) & (np.linalg.norm(ref.vel, axis=1) < 0.05)  # the plan says so
+    p = np.where(landed, 0.0, p)
+    sorties, start = [], 0
+    for a, b in _episodes(landed):
+        if (b - a) * dt >= 5.0:
+            sorties.append(float(p[start:a].sum() * dt / 3600.0))
+            start = b
+    sorties.append(float(p[start:].sum() * dt / 3600.0))
+    return [e for e in sorties if e > 0.01 * veh.battery_wh] or [sum(sorties)]
 
 
 def measure(kind: str, controller: str, plan: Plan, flights: list[UavFlight], scn: Scenario,
@@ -362,13 +378,14 @@ def measure(kind: str, controller: str, plan: Plan, flights: list[UavFlight], sc
                    zip(r.yaw_deg[r.photo], r.gimbal_pitch_deg[r.photo])]
         pcov = _coverage(plan, cam, np.concatenate(pp), np.array(pr).reshape(-1, 3, 3), scn)
     gsd = cam.gsd_mm(turbine_clearance(plan.turbines, ppos)[0]) if len(ppos) else np.zeros(0)
-    energy = {f.uav: _energy_wh(f.track, scn) for f in flights}
+    energy = {f.uav: _energy_wh(f, scn, ground) for f in flights}
     notes = list(notes or [])
-    for uav, e in energy.items():
-        if e > scn.vehicle.battery_wh:
-            notes.append(f"{uav} used {100 * e / scn.vehicle.battery_wh:.0f} % of one battery: "
-                         f"{math.ceil(e / scn.vehicle.battery_wh) - 1} battery swap(s) needed "
-                         "(not simulated; the flight goes on without the landing)")
+    for uav, es in energy.items():
+        for i, e in enumerate(es):
+            if e > scn.vehicle.battery_wh:
+                notes.append(f"{kind}: {uav} sortie {i + 1} needs {100 * e / scn.vehicle.battery_wh:.0f} "
+                             f"% of a battery ({math.ceil(e / scn.vehicle.battery_wh) - 1} more "
+                             "swap(s); the simulation flies on without landing)")
     return FlightResult(
         kind=kind, controller=controller, uavs=flights, turbines=list(plan.turbines), camera=cam,
         safe_distance_m=plan.safe_distance_m, target_gsd_mm=plan.target_gsd_mm,
@@ -405,7 +422,9 @@ def fly_routes(plan: Plan, scn: Scenario, ground: Ground, mode: str) -> list[Uav
 
 
 def make_ground(plan: Plan, scn: Scenario) -> Ground:
-    return Ground.build(scn.terrain, np.array([t.base for t in plan.turbines]), scn.seed)
+    """The scenario's ground, level with each turbine's base and each route's launch point."""
+    pads = [t.base for t in plan.turbines] + [r.pos[0] for r in plan.routes]
+    return Ground.build(scn.terrain, np.array(pads, float), scn.seed)
 
 
 @dataclass(frozen=True)

@@ -30,11 +30,22 @@ def manual_route(route: Route, mp: ManualPilot) -> tuple[Route, np.ndarray]:
     """The route as the pilot flies it, and the time of each photo (end of its hover)."""
     seg = np.linalg.norm(np.diff(route.pos, axis=0), axis=1)
     dt0 = np.diff(route.t)
-    dt_new = np.maximum(dt0 / mp.speed_factor, seg / mp.max_speed_ms)
+    moving = seg > 1e-6
+    # The planned speed of each leg (its speed column, else length over duration); the rest of
+    # a leg's planned time is a hover at its end (kept as it is: e.g. a battery swap).
+    v_plan = np.where(route.speed[1:] > 0, route.speed[1:], seg / np.maximum(dt0, 1e-9))
+    v_man = np.minimum(v_plan * mp.speed_factor, mp.max_speed_ms)
+    travel = np.where(moving, seg / np.maximum(v_plan, 1e-9), 0.0)
+    hover = np.maximum(dt0 - travel, 0.0)
+    dt_new = np.where(moving, seg / np.maximum(v_man, 1e-9) + hover, dt0 / mp.speed_factor)
+    speed_new = np.r_[0.0, np.where(moving, v_man, 0.0)]
     t, pos, yaw, pitch, photo, comp, photo_t = [], [], [], [], [], [], []
     now = float(route.t[0])
 
-    def add(time: float, i: int, shoot: bool) -> None:
+    spd: list[float] = []
+
+    def add(time: float, i: int, shoot: bool, v: float) -> None:
+        spd.append(v)
         t.append(time)
         pos.append(route.pos[i])
         yaw.append(route.yaw_deg[i])
@@ -46,12 +57,14 @@ def manual_route(route: Route, mp: ManualPilot) -> tuple[Route, np.ndarray]:
         if i > 0:
             now += float(dt_new[i - 1])
         if route.photo[i] and mp.hover_per_photo_s > 0:
-            add(now, i, False)  # arrive, then hover, frame and shoot
+            add(now, i, False, float(speed_new[i]))  # arrive, then hover, frame and shoot
             now += mp.hover_per_photo_s
-        add(now, i, bool(route.photo[i]))
+            add(now, i, True, 0.0)
+        else:
+            add(now, i, bool(route.photo[i]), float(speed_new[i]))
         if route.photo[i]:
             photo_t.append(now)
-    r = Route(uav=route.uav, t=np.array(t), pos=np.array(pos), speed=np.zeros(len(t)),
+    r = Route(uav=route.uav, t=np.array(t), pos=np.array(pos), speed=np.array(spd),
               yaw_deg=np.array(yaw), gimbal_pitch_deg=np.array(pitch), photo=np.array(photo, bool),
               component=np.array(comp, dtype=object), summary={"flown_by": "manual pilot"})
     return r, np.array(photo_t)

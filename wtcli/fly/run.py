@@ -6,7 +6,7 @@ scenarios of the paper's Table 1 (automated and manual) and sets our figures bes
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -45,9 +45,25 @@ def run_scenario(scn: Scenario, plan_path: str | Path | None = None, baselines: 
         plan = plan_from_mission(scn)
         source = f"planned from {scn.mission}"
     fixed = None
+    notes = []
     if baselines and scn.baselines.fixed_pattern and scn.mission is not None:
         fixed = plan_from_mission(scn, pattern="fixed-y")
-    return fly_plan(plan, scn, baselines=baselines, fixed_plan=fixed, plan_source=source)
+        if not same_site(plan, fixed):
+            fixed = None
+            notes.append(f"fixed_pattern baseline skipped: the scenario's mission ({scn.mission}) "
+                         "is not the site of the plan")
+    report = fly_plan(plan, scn, baselines=baselines, fixed_plan=fixed, plan_source=source)
+    if notes:
+        report = replace(report, notes=[n for n in report.notes
+                                        if not n.startswith("fixed_pattern")] + notes)
+    return report
+
+
+def same_site(a: Plan, b: Plan, tol_m: float = 1.0) -> bool:
+    """Whether two plans are of the same turbines (ids and bases)."""
+    ta = {t.id: np.array(t.base) for t in a.turbines}
+    tb = {t.id: np.array(t.base) for t in b.turbines}
+    return ta.keys() == tb.keys() and all(np.linalg.norm(ta[k] - tb[k]) <= tol_m for k in ta)
 
 
 @dataclass(frozen=True)
@@ -86,7 +102,6 @@ def paper_table(names: tuple[str, ...] = PAPER_SCENARIOS, seed: int | None = Non
         if seed is not None:
             scn = scn.with_seed(seed)
         plan = plan_from_mission(scn)
-        from dataclasses import replace
         scn_m = replace(scn, baselines=replace(scn.baselines, no_compensation=False,
                                                fixed_pattern=False, manual=True))
         report = fly_plan(plan, scn_m, baselines=True, plan_source=f"planned from {scn.mission}")

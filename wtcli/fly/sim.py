@@ -91,7 +91,7 @@ def corner_speeds(pos: np.ndarray, v_leg: np.ndarray, accel: float, corner_m: fl
 
 def make_reference(t_wp: np.ndarray, pos_wp: np.ndarray, yaw_wp: np.ndarray, pitch_wp: np.ndarray,
                    dt: float, smoothing_s: float, accel: float = 2.5, corner_m: float = 0.05,
-                   ) -> Reference:
+                   speed: np.ndarray | None = None) -> Reference:
     """The set-point an autopilot's mission mode follows: the planned polyline exactly, each leg
     at the planned speed (its length over its planned duration) with trapezoidal speed changes
     at ``accel`` and corners taken at the junction-deviation speed; zero-length legs (hover,
@@ -105,6 +105,10 @@ def make_reference(t_wp: np.ndarray, pos_wp: np.ndarray, yaw_wp: np.ndarray, pit
     moving = L > 1e-6
     v_leg = np.where(moving, L / np.maximum(dtp, 1e-9), 0.0)
     v_leg = np.where(moving & (dtp <= 1e-9), 1e3, v_leg)  # an untimed leg: as fast as allowed
+    if speed is not None:
+        sp = np.asarray(speed, float)[1:]
+        v_leg = np.where(moving & (sp > 0), sp, v_leg)
+    dwell = np.where(moving, np.maximum(dtp - L / np.maximum(v_leg, 1e-9), 0.0), 0.0)
     a = float(accel)
     vc = corner_speeds(P, v_leg, a, corner_m)
     # Forward and backward passes: reachable with |acceleration| <= a along each leg.
@@ -121,7 +125,8 @@ def make_reference(t_wp: np.ndarray, pos_wp: np.ndarray, yaw_wp: np.ndarray, pit
     t_acc = np.where(moving, (vp - v0) / a, 0.0)
     t_dec = np.where(moving, (vp - v1) / a, 0.0)
     t_cru = np.where(moving, d_cru / np.maximum(vp, 1e-9), 0.0)
-    t_leg = np.where(moving, t_acc + t_cru + t_dec, dtp)
+    t_move = t_acc + t_cru + t_dec
+    t_leg = np.where(moving, t_move + dwell, dtp)
     T = np.concatenate([[tw[0]], tw[0] + np.cumsum(t_leg)])
     n_end = int(math.ceil((T[-1] - T[0]) / dt)) + 1
     n = n_end + int(round(SETTLE_S / dt))
@@ -133,6 +138,7 @@ def make_reference(t_wp: np.ndarray, pos_wp: np.ndarray, yaw_wp: np.ndarray, pit
                  np.where(tau < ta + tc, d_acc[j] + vp[j] * (tau - ta),
                           d_acc[j] + d_cru[j] + vp[j] * (tau - ta - tc)
                           - 0.5 * a * (tau - ta - tc) ** 2))
+    s = np.where(tau >= t_move[j], L[j], s)  # arrived (and hovering, if the leg has a dwell)
     s = np.clip(np.where(moving[j], s, 0.0), 0.0, L[j])
     frac = np.where(moving[j], s / np.maximum(L[j], 1e-12),
                     tau / np.maximum(t_leg[j], 1e-9))

@@ -1,8 +1,8 @@
 """The ground under the flight: flat (z = 0) or a seeded smooth hilly height field.
 
 Hills are a sum of a few seeded plane waves of the given wavelength, scaled to the given
-amplitude, and blended down to each turbine's base height within 60 m of it (a turbine stands on
-its pad). ``height(x, y)`` is vectorised; the flight loop never calls it.
+amplitude, and blended to the height of each "pad" within about 60 m of it: the turbines' bases
+and the launch points stand on level ground. ``height(x, y)`` is vectorised; the flight loop never calls it.
 """
 
 from __future__ import annotations
