@@ -87,6 +87,7 @@ def render_sample(seed: int, width: int = 640, height: int = 480,
     cam = scene.camera
     zenith, horizon = sky_colours(scene.env, rng)
     bg = render_background(cam, scene.env, scene.turbine, rng, zenith, horizon)
+    bg = _shadows(bg, scene)
     bg = _distractors(bg, scene, rng)
     bg = _buildings(bg, scene, rng, horizon)
 
@@ -94,7 +95,8 @@ def render_sample(seed: int, width: int = 640, height: int = 480,
     colour, (parts, boxes) = _render_turbines(turbines, scene, rng, zenith, horizon)
     premult, alpha = colour
     img = premult + bg * (1.0 - alpha[..., None])
-    image, effects = camera_effects(img.astype(np.float32), rng)
+    img = _lens_flare(img.astype(np.float32), scene, rng)
+    image, effects = camera_effects(img, rng)
 
     instances, owners = _instances(parts, boxes, turbines, width, height)
     truth = _truth(seed, scene, instances, owners, effects)
@@ -363,6 +365,61 @@ def _truth(seed, scene: Scene, instances: Instances, owners, effects) -> dict[st
         "environment": scene.env.to_dict(),
         "camera_effects": effects,
     }
+
+
+def _shadows(bg: np.ndarray, scene: Scene) -> np.ndarray:
+    """The turbines' shadows on the flat ground in direct sun: blade-shaped dark streaks that
+    are not blades. Each face of a coarse mesh is cast along the sun onto z = 0 and projected
+    through the scene camera."""
+    env, cam = scene.env, scene.camera
+    L = sun_direction(env)
+    if env.sun_strength < 0.3 or L[2] < 0.1:
+        return bg
+    H, W = bg.shape[:2]
+    shadow = np.zeros((H, W), np.float32)
+    for t in (scene.turbine,) + scene.others:
+        m = t.mesh(6, 12)
+        ground = m.vertices - L[None, :] * (m.vertices[:, 2:3] / L[2])
+        uv, z = cam.project(ground)
+        tri = uv[m.faces]
+        ok = (z[m.faces] > 0.5).all(axis=1)
+        u, v = tri[..., 0], tri[..., 1]
+        ok &= (u.max(1) >= 0) & (u.min(1) < W) & (v.max(1) >= 0) & (v.min(1) < H)
+        ok &= np.abs(tri).max(axis=(1, 2)) < 1e6
+        for pts in np.round(tri[ok] * 16).astype(np.int32):
+            cv2.fillConvexPoly(shadow, pts, 1.0, cv2.LINE_AA, 4)
+    if not shadow.any():
+        return bg
+    k = 0.55 * env.sun_strength * (1.0 - 0.5 * math.exp(-L[2] * 3))
+    return bg * (1.0 - k * np.clip(shadow, 0, 1))[..., None]
+
+
+def _lens_flare(img: np.ndarray, scene: Scene, rng) -> np.ndarray:
+    """Ghosts of the sun along the line through the image centre, when the sun is in or near
+    the frame (backlit drone photos show them)."""
+    env, cam = scene.env, scene.camera
+    if env.sun_strength < 0.4 or rng.random() > 0.6:
+        return img
+    uv, z = cam.project(cam.position[None] + 1e5 * sun_direction(env)[None])
+    H, W = img.shape[:2]
+    if z[0] <= 0:
+        return img
+    sx, sy = uv[0]
+    if not (-0.3 * W < sx < 1.3 * W and -0.3 * H < sy < 1.3 * H):
+        return img
+    f = max(1, W // 320)
+    small = np.zeros((H // f + 1, W // f + 1, 3), np.float32)
+    c = np.array([W / 2, H / 2])
+    sun = np.array([sx, sy])
+    tint = np.array([0.9, 0.8, 0.6], np.float32) + rng.normal(0, 0.08, 3).astype(np.float32)
+    for _ in range(int(rng.integers(3, 7))):
+        t = float(rng.uniform(0.3, 2.0))
+        p = (sun + (c - sun) * t) / f
+        r = float(rng.uniform(0.01, 0.06)) * W / f
+        col = tuple(float(x) for x in np.clip(tint * rng.uniform(0.04, 0.12), 0, 1))
+        cv2.circle(small, (int(p[0]), int(p[1])), max(1, int(r)), col, -1, cv2.LINE_AA)
+    small = cv2.GaussianBlur(small, (0, 0), max(1.0, 1.5 / f))
+    return img + env.sun_strength * cv2.resize(small, (W, H), interpolation=cv2.INTER_LINEAR)
 
 
 def _buildings(bg: np.ndarray, scene: Scene, rng, horizon: np.ndarray) -> np.ndarray:
