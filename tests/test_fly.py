@@ -294,3 +294,57 @@ def test_paper_strong_wind_scenario_meets_the_done_criteria():
     assert auto.coverage_average >= 0.97
     assert row.ours["manual"]["time_min"] > row.ours["automated"]["time_min"]
     assert row.ours["manual"]["deviation_m"] > 5 * row.ours["automated"]["deviation_m"]
+
+
+def test_set_point_follows_the_path_and_slows_for_corners():
+    pts = np.array([[0, 0, 20], [30, 0, 20], [30, 30, 20], [0, 30, 20]], float)
+    r = route_through(pts, speed=5.0)
+    ref = make_reference(r.t, r.pos, r.yaw_deg, r.gimbal_pitch_deg, 0.02, 0.3, accel=2.5,
+                         corner_m=0.05)
+    seg = np.clip(np.floor(ref.wp_index).astype(int), 0, len(pts) - 2)
+    assert path_deviation(pts, seg, ref.pos).max() < 0.05
+    speed = np.linalg.norm(ref.vel, axis=1)
+    assert speed.max() == pytest.approx(5.0, abs=0.05)
+    at_corner = ref.reach_step([1, 2])
+    assert (speed[at_corner] < 1.0).all()  # a 90-degree corner is taken slowly
+    acc = np.linalg.norm(np.diff(ref.vel, axis=0) / 0.02, axis=1)
+    assert acc.max() < 9.81 * math.tan(math.radians(30))  # within what the vehicle can do
+
+
+def test_plan_speed_and_hover_at_the_end_of_a_leg():
+    """A leg whose planned time exceeds its length / speed ends in a hover (a battery swap)."""
+    pts = np.array([[0, 0, 20], [20, 0, 20], [20, 0, 0.0]], float)
+    r = Route("UAV1", np.array([0.0, 10.0, 200.0]), pts, np.array([0.0, 2.0, 2.0]),
+              np.zeros(3), np.zeros(3), np.zeros(3, bool), np.array(["a", "b", "launch"], object))
+    ref = make_reference(r.t, r.pos, r.yaw_deg, r.gimbal_pitch_deg, 0.02, 0.0, accel=2.5,
+                         speed=r.speed)
+    k = ref.reach_step([2])[0]
+    assert ref.t[k] < 30  # down at 2 m/s, not spread over the 190 s
+    assert ref.t[ref.end_index - 1] == pytest.approx(200, abs=2)  # + time to speed up, slow down
+
+
+def test_manual_route_hovers_per_photo_and_keeps_the_geometry():
+    from wtcli.fly.pilot import manual_route
+
+    plan = blade_pass_plan()
+    r = plan.routes[0]
+    scn = default_scenario()
+    m, _ = manual_route(r, scn.manual_pilot)
+    assert m.photo.sum() == r.photo.sum()
+    assert m.length_m == pytest.approx(r.length_m)
+    hover = scn.manual_pilot.hover_per_photo_s * r.photo.sum()
+    assert m.duration_s >= r.duration_s / scn.manual_pilot.speed_factor + hover - 1e-6
+
+
+def test_low_transit_over_hills_is_a_violation():
+    t = turbine()
+    pts = np.array([[-400, 200, 0.5], [-400, 200, 12], [400, 200, 12], [400, 200, 0.5]], float)
+    r = route_through(pts, speed=8.0, component="transit")
+    plan = Plan([t], CAM, [r], 3.0, 1.5)
+    scn = default_scenario(terrain={"kind": "hilly", "amplitude_m": 40, "wavelength_m": 300,
+                                    "min_transit_agl_m": 20}, **QUIET)
+    f = fly_plan(plan, scn).automated
+    kinds = {v.kind for v in f.violations}
+    assert kinds & {"ground", "transit_altitude"}
+    flat = fly_plan(plan, default_scenario(terrain={"min_transit_agl_m": 10}, **QUIET)).automated
+    assert not flat.violations

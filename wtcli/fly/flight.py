@@ -313,7 +313,7 @@ def measure(kind: str, controller: str, plan: Plan, flights: list[UavFlight], sc
             ) -> FlightResult:
     # Time: each UAV until it settles within SETTLED_M of its last waypoint after the reference
     # ends (or the end of the settle window).
-    times, devs, trks, agls, pos_all, t_all, uav_all, ref_all, comp_all = [], [], [], [], [], [], [], [], []
+    times, devs, trks, pos_all, t_all, uav_all, ref_all, comp_all, vz_all = ([] for _ in range(9))
     for f in flights:
         tr, ref = f.track, f.ref
         end = ref.end_index
@@ -329,6 +329,7 @@ def measure(kind: str, controller: str, plan: Plan, flights: list[UavFlight], sc
         t_all.append(tr.t[sl])
         uav_all.append(np.full(len(pos), f.uav, dtype=object))
         ref_all.append(ref.pos[sl])
+        vz_all.append(ref.vel[sl, 2])
         seg = np.clip(np.floor(ref.wp_index[sl]).astype(int) + 1, 0, len(f.route) - 1)
         comp_all.append(f.route.component[seg])
     P = np.concatenate(pos_all)
@@ -357,8 +358,11 @@ def measure(kind: str, controller: str, plan: Plan, flights: list[UavFlight], sc
     planned_low = ref_agl < scn.terrain.min_agl_m + 2.0  # take-off and landing: planned low
     add("ground", (agl < scn.terrain.min_agl_m) & ~planned_low, agl, "ground")
     transit = np.array(["transit" in str(c) for c in COMP])
-    add("transit_altitude", transit & (agl < scn.terrain.min_transit_agl_m)
-        & (ref_agl >= scn.terrain.min_transit_agl_m), agl, "ground")
+    level = np.abs(np.concatenate(vz_all)) < 0.5
+    # Level transit legs (not the climb out or the descent to land) must keep the terrain's
+    # transit height: a plan made for flat ground can be too low over a hill.
+    add("transit_altitude", transit & level & ~planned_low & (agl < scn.terrain.min_transit_agl_m),
+        agl, "ground")
     violations.sort(key=lambda v: (v.t_start, v.uav, v.kind))
 
     # Photos: real poses -> the one coverage measure.
