@@ -159,7 +159,7 @@ _NUM = {
     "wind": {"speed_ms": (0, 40, False), "reference_height_m": (1, 300, False),
              "direction_deg": (-360, 360, False), "shear_exponent": (0, 0.6, False)},
     "terrain": {"amplitude_m": (0, 200, False), "wavelength_m": (50, 5000, False),
-                "min_agl_m": (0, 100, False), "min_transit_agl_m": (0, 300, False)},
+                "min_agl_m": (0, 100, False)},
     "vehicle": {"max_speed_ms": (0.5, 30, False), "max_climb_ms": (0.2, 15, False),
                 "max_descent_ms": (0.2, 15, False), "max_tilt_deg": (5, 60, False),
                 "max_vertical_accel_ms2": (0.5, 20, False),
@@ -253,7 +253,10 @@ def scenario_from_dict(d: Any, where: str = "scenario", base_dir: Path | None = 
     tf = number(m["terrain"], "turbulence_factor", f"{w}terrain", lo=0, hi=5, default=None)
     if tf is None:
         tf = 1.3 if kind == "hilly" else 1.0
-    terrain = Terrain(kind=kind, turbulence_factor=tf, **vals["terrain"])
+    mt = number(m["terrain"], "min_transit_agl_m", f"{w}terrain", lo=0, hi=300, default=None)
+    if mt is None:
+        mt = 20.0 if kind == "hilly" else 0.0
+    terrain = Terrain(kind=kind, turbulence_factor=tf, min_transit_agl_m=mt, **vals["terrain"])
     if kind == "flat" and terrain.amplitude_m > 0:
         raise ConfigError(f"{w}terrain.amplitude_m: flat terrain has no hills; use kind: hilly "
                           f"or amplitude_m: 0, got {terrain.amplitude_m}")
