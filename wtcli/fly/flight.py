@@ -190,7 +190,8 @@ def fly_route(route: Route, scn: Scenario, ground: Ground, uav_index: int, mode:
     c = scn.control
     ref = make_reference(flown.t, flown.pos, flown.yaw_deg, flown.gimbal_pitch_deg, dt,
                          c.reference_smoothing_s, c.reference_accel_ms2, c.corner_deviation_m,
-                         speed=flown.speed)
+                         speed=flown.speed, yaw_rate=scn.vehicle.yaw_rate_deg_s,
+                         pitch_rate=scn.vehicle.gimbal_rate_deg_s)
     n = len(ref.t)
     g_ref = ground.height(ref.pos)
     h_rep = float(np.median(ref.pos[:, 2] - g_ref))

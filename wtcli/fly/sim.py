@@ -91,7 +91,8 @@ def corner_speeds(pos: np.ndarray, v_leg: np.ndarray, accel: float, corner_m: fl
 
 def make_reference(t_wp: np.ndarray, pos_wp: np.ndarray, yaw_wp: np.ndarray, pitch_wp: np.ndarray,
                    dt: float, smoothing_s: float, accel: float = 2.5, corner_m: float = 0.05,
-                   speed: np.ndarray | None = None) -> Reference:
+                   speed: np.ndarray | None = None, yaw_rate: float | None = None,
+                   pitch_rate: float | None = None) -> Reference:
     """The set-point an autopilot's mission mode follows: the planned polyline exactly, each leg
     at the planned speed (its length over its planned duration) with trapezoidal speed changes
     at ``accel`` and corners taken at the junction-deviation speed; zero-length legs (hover,
@@ -108,6 +109,14 @@ def make_reference(t_wp: np.ndarray, pos_wp: np.ndarray, yaw_wp: np.ndarray, pit
     if speed is not None:
         sp = np.asarray(speed, float)[1:]
         v_leg = np.where(moving & (sp > 0), sp, v_leg)
+    t_turn = np.zeros(len(L))
+    yaw_u = np.degrees(np.unwrap(np.radians(np.asarray(yaw_wp, float))))
+    if yaw_rate:
+        t_turn = np.maximum(t_turn, np.abs(np.diff(yaw_u)) / (0.5 * yaw_rate))
+    if pitch_rate:
+        t_turn = np.maximum(t_turn, np.abs(np.diff(np.asarray(pitch_wp, float))) / (0.5 * pitch_rate))
+    v_leg = np.where(moving & (t_turn > 0), np.minimum(v_leg, L / np.maximum(t_turn, 1e-9)), v_leg)
+    dtp = np.where(~moving, np.maximum(dtp, t_turn), dtp)
     dwell = np.where(moving, np.maximum(dtp - L / np.maximum(v_leg, 1e-9), 0.0), 0.0)
     a = float(accel)
     vc = corner_speeds(P, v_leg, a, corner_m)
@@ -152,7 +161,7 @@ def make_reference(t_wp: np.ndarray, pos_wp: np.ndarray, yaw_wp: np.ndarray, pit
     vel = np.gradient(pos, dt, axis=0)
     acc = np.gradient(vel, dt, axis=0)
     idx = np.arange(len(P), dtype=float)
-    yaw = np.interp(u, idx, np.degrees(np.unwrap(np.radians(yaw_wp))))
+    yaw = np.interp(u, idx, yaw_u)
     pitch = np.interp(u, idx, pitch_wp)
     return Reference(t, pos, vel, acc, yaw, pitch, n_end, u)
 
@@ -206,6 +215,8 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
     V = ref.vel.tolist()
     A = (ref.acc if gains.feed_forward and mode != "pilot" else np.zeros_like(ref.acc)).tolist()
     YR, PR = ref.yaw_deg.tolist(), ref.pitch_deg.tolist()
+    YF = np.gradient(ref.yaw_deg, dt).tolist()  # set-point rates, fed forward
+    PF = np.gradient(ref.pitch_deg, dt).tolist()
     WX = wind.extra.tolist()
     GR = np.asarray(ground_under_ref, float).tolist()
     npos = (rng.standard_normal((n, 3)) * veh.position_noise_m).tolist()
@@ -328,10 +339,10 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
             px += vx * dtp
             py += vy * dtp
             pz += vz * dtp
-        # Camera heading and gimbal: first-order tracking with rate limits.
-        d = (YR[k] - yaw) / yr_tau
+        # Camera heading and gimbal: rate feed-forward plus first-order tracking, rate-limited.
+        d = YF[k] + (YR[k] - yaw) / yr_tau
         yaw += (yr_rate if d > yr_rate else -yr_rate if d < -yr_rate else d) * dt
-        d = (PR[k] - pit) / gp_tau
+        d = PF[k] + (PR[k] - pit) / gp_tau
         pit += (gp_rate if d > gp_rate else -gp_rate if d < -gp_rate else d) * dt
         out_p.append((px, py, pz))
         out_v.append((vx, vy, vz))
