@@ -39,7 +39,11 @@ def site(n: int, rng: np.random.Generator) -> Mission:
             base=(400.0 * (i % side), 400.0 * (i // side), float(rng.uniform(0, 10))),
             hub_height=80.0, rotor_diameter=90.0, yaw_deg=float(rng.uniform(0, 360))))
     uavs = tuple(f"UAV{k + 1}" for k in range(max(1, n // 10)))
-    return Mission(tuple(ts), CAM, fleet=Fleet(uavs=uavs, launch=(-100.0, -100.0, 0.0)),
+    # One launch point for the whole site: far turbines need the cruise there and back within a
+    # battery, so large sites get a longer-lasting battery (a real team would move the launch).
+    battery = 25.0 if n <= 10 else 45.0
+    return Mission(tuple(ts), CAM, fleet=Fleet(uavs=uavs, launch=(-100.0, -100.0, 0.0),
+                                               battery_minutes=battery),
                    settings=Settings(min_side_coverage=0.0))
 
 
