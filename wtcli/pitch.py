@@ -615,10 +615,16 @@ def is_photo(path: Path) -> bool:
 
 
 def photo_input(path: Path, area_threshold: float) -> PitchInput:
-    """One photo as pitch input. The segment stage plugs in here (segment -> find_contours);
-    until then a photo is refused with a hint."""
-    raise InputError(f"{path}: a photo; pitch reads masks, contours or instances "
-                     "(run `wtinspect segment` on it first)")
+    """One photo as pitch input: segmented with the shipped model (``wtcli.segment``), then
+    ``find_contours`` as for an instances JSON; the photo is the overlay's background."""
+    from wtcli.segment.infer import segment_photo
+
+    rec, inst = segment_photo(path)
+    try:
+        cs = require_contours(find_contours(inst, area_threshold, image=rec, source=str(path)))
+        return PitchInput(cs, None, rec, (path,))
+    except PerceptionError as e:
+        return PitchInput(None, str(e), rec, (path,))
 
 
 def _mixed(photo: Path) -> list[PitchInput]:

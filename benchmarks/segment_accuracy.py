@@ -1,0 +1,268 @@
+"""Accuracy and speed of the shipped segmenter (models/wtseg-r18s.pt).
+
+    python benchmarks/segment_accuracy.py [--n 300] [--model PATH] [--real DIR] [--out FILE]
+
+1. Held-out synthetic set: ``render_sample(9_000_000 + i, 640, 480, view)`` — seeds never used
+   in training (training uses 1_000_000 + i) — with every other image a front view and the rest
+   drawn from the renderer's mix (oblique, side, rear; ground, sea, skies). Reported:
+   * mask IoU per class: IoU of the class's union mask (score >= 0.5) with the truth's, per
+     image where either has the class, averaged;
+   * AP50 per class (instances matched greedily by score at mask IoU >= 0.5);
+   * front views: share where segment -> contours -> pitch finds exactly the true number of
+     visible blades of the main turbine (``truth["blades_visible"]``);
+   * front views: end-to-end blade θ error — segment -> ``wtcli.pitch.pitch_from_instances`` —
+     each measured blade matched to the true blade of nearest φ; |θ error| mod 180. The same
+     pitch run on the TRUE masks is printed beside it, to separate segmentation error from
+     pitch error.
+2. Speed: one 1024 x 683 render, images/s of our model (``predict``, as ``segment`` runs it)
+   and of torchvision's stock ``maskrcnn_resnet50_fpn(weights=None, weights_backbone=None)`` on
+   the same input tensor, in this one process, same thread count; their ratio. (Untrained stock
+   weights: its timing includes its usual 100 detections per image.)
+3. Real photos, when ``--real`` (default ../shared/real-photos beside the repo) exists: blade and tower IoU
+   against its semantic masks (0 background, 1 blade, 2 tower incl. nacelle/hub; our tower
+   prediction = tower ∪ nacelle), and the blade count on the photos the manifest tags as front
+   views. These photos are for evaluation only: never train on them or copy them into the repo.
+
+Results are printed and written as JSON (``--out``, default benchmarks/results/segment_accuracy.json).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from wtcli.errors import WtError  # noqa: E402
+from wtcli.jsonio import document, write_json  # noqa: E402
+from wtcli.masks import Instances  # noqa: E402
+from wtcli.segment.data import HELDOUT_SEED_BASE, image_tensor  # noqa: E402
+from wtcli.segment.evaluate import Evaluator, mask_iou  # noqa: E402
+from wtcli.segment.infer import load_model, predict  # noqa: E402
+from wtcli.segment.model import resolve_weights  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def theta_diff(a: float, b: float) -> float:
+    d = abs(a - b) % 180.0
+    return min(d, 180.0 - d)
+
+
+def phi_diff(a: float, b: float) -> float:
+    d = abs(a - b) % 360.0
+    return min(d, 360.0 - d)
+
+
+def pitch_errors(inst: Instances, truth: dict) -> tuple[int, list[float]]:
+    """(blades found, |θ error| of each found blade vs the true blade nearest in φ)."""
+    from wtcli.pitch import pitch_from_instances
+
+    try:
+        res = pitch_from_instances(inst, expected_blades=None)
+    except WtError:
+        return 0, []
+    true = [b for b in truth["blades"] if b.get("visible")]
+    errs = []
+    for b in res.blades:
+        if true:
+            t = min(true, key=lambda tb: phi_diff(tb["phi_deg"], b.phi_deg))
+            errs.append(theta_diff(b.theta_deg, t["theta_deg"]))
+    return len(res.blades), errs
+
+
+def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | None = None) -> dict:
+    from wtcli.synth.render import render_sample
+
+    ev = Evaluator(0.5)
+    views: dict[str, int] = {}
+    grounds: dict[str, int] = {}
+    front_n = front_right = gt_right = 0
+    errs, gt_errs = [], []
+    t0 = time.perf_counter()
+    done = 0
+    for i in range(n):
+        if max_minutes and time.perf_counter() - t0 > 60 * max_minutes:
+            log(f"  time limit: stopped after {i} images")
+            break
+        done = i + 1
+        s = render_sample(HELDOUT_SEED_BASE + i, width=width, height=height,
+                          view="front" if i % 2 == 0 else None)
+        views[s.truth["view"]] = views.get(s.truth["view"], 0) + 1
+        g = (s.truth.get("environment") or {}).get("ground", "?")
+        grounds[g] = grounds.get(g, 0) + 1
+        pred = predict(model, s.image, score_threshold=0.0)
+        ev.add(pred, s.instances)
+        if s.truth["view"] == "front":
+            front_n += 1
+            conf = pred[pred.scores >= 0.5] if len(pred) else pred
+            k, e = pitch_errors(conf, s.truth)
+            front_right += k == s.truth["blades_visible"]
+            errs += e
+            k2, e2 = pitch_errors(s.instances, s.truth)
+            gt_right += k2 == s.truth["blades_visible"]
+            gt_errs += e2
+        if (i + 1) % 25 == 0:
+            log(f"  {i + 1}/{n} images, {time.perf_counter() - t0:.0f} s")
+    out = ev.summary()
+    out.update({
+        "n": done, "n_asked": n, "width": width, "height": height,
+        "seeds": [HELDOUT_SEED_BASE, HELDOUT_SEED_BASE + done - 1],
+        "views": views, "grounds": grounds,
+        "front_views": front_n,
+        "front_right_blade_count": front_right / front_n if front_n else None,
+        "front_right_blade_count_on_true_masks": gt_right / front_n if front_n else None,
+        "theta_error_mean_deg": float(np.mean(errs)) if errs else None,
+        "theta_error_median_deg": float(np.median(errs)) if errs else None,
+        "theta_error_p95_deg": float(np.percentile(errs, 95)) if errs else None,
+        "theta_blades_measured": len(errs),
+        "theta_error_mean_on_true_masks_deg": float(np.mean(gt_errs)) if gt_errs else None,
+        "seconds": time.perf_counter() - t0,
+    })
+    return out
+
+
+def speed(model, runs: int, with_stock: bool) -> dict:
+    from wtcli.synth.render import render_sample
+
+    img = render_sample(HELDOUT_SEED_BASE + 999_999, width=1024, height=683, view="front").image
+
+    def clock(fn) -> float:
+        fn()
+        t = time.perf_counter()
+        for _ in range(runs):
+            fn()
+        return runs / (time.perf_counter() - t)
+
+    ours = clock(lambda: predict(model, img, score_threshold=0.5))
+    out = {"input": "1024x683 BGR render", "runs": runs, "threads": torch.get_num_threads(),
+           "ours_images_per_s": ours}
+    if with_stock:
+        from torchvision.models.detection import maskrcnn_resnet50_fpn
+
+        torch.manual_seed(0)
+        stock = maskrcnn_resnet50_fpn(weights=None, weights_backbone=None).eval()
+        x = image_tensor(img)
+
+        def run_stock():
+            with torch.inference_mode():
+                stock([x])
+
+        out["stock_r50_fpn_images_per_s"] = clock(run_stock)
+        out["speedup_vs_stock"] = ours / out["stock_r50_fpn_images_per_s"]
+    return out
+
+
+def _col(fields: list[str], *keys: str) -> str | None:
+    for k in keys:
+        for f in fields:
+            if k in f.lower():
+                return f
+    return None
+
+
+def real_photos(model, root: Path, log) -> dict:
+    """IoU on the real photos' semantic masks; blade count on their front views."""
+    man = root / "manifest.csv"
+    rows = list(csv.DictReader(man.open(encoding="utf-8"))) if man.is_file() else []
+    fields = list(rows[0].keys()) if rows else []
+    c_img = _col(fields, "image", "photo", "file")
+    c_mask = _col(fields, "mask", "label")
+    c_view = _col(fields, "view", "tag")
+    items = []
+    if rows and c_img:
+        for r in rows:
+            ip = root / r[c_img]
+            mp = root / r[c_mask] if c_mask and r.get(c_mask) else None
+            items.append((ip, mp, (r.get(c_view) or "") if c_view else ""))
+    else:  # no usable manifest: pair images/X.* with masks/X.png
+        for ip in sorted((root / "images").glob("*")):
+            items.append((ip, root / "masks" / (ip.stem + ".png"), ""))
+    blade_iou, tower_iou, counts = [], [], []
+    errors = []
+    for ip, mp, view in items:
+        img = cv2.imread(str(ip), cv2.IMREAD_COLOR)
+        if mp is None or not mp.is_file():
+            cand = sorted((root / "masks").glob(ip.stem + ".*")) if (root / "masks").is_dir() else []
+            mp = cand[0] if cand else None
+        sem = cv2.imread(str(mp), cv2.IMREAD_UNCHANGED) if mp is not None else None
+        if img is None or sem is None:
+            errors.append(str(ip))
+            continue
+        if sem.ndim == 3:
+            sem = sem[:, :, 0]
+        if sem.shape != img.shape[:2]:
+            sem = cv2.resize(sem, (img.shape[1], img.shape[0]), interpolation=cv2.INTER_NEAREST)
+        pred = predict(model, img, score_threshold=0.5)
+        blade = pred.of("blade").union() if len(pred) else np.zeros(sem.shape, bool)
+        tower = (pred.of("tower").union() | pred.of("nacelle").union()) if len(pred) else np.zeros(sem.shape, bool)
+        blade_iou.append(mask_iou(blade, sem == 1))
+        tower_iou.append(mask_iou(tower, sem == 2))
+        if "front" in view.lower():
+            from wtcli.pitch import pitch_from_instances
+
+            try:
+                k = len(pitch_from_instances(pred, expected_blades=None).blades)
+            except WtError:
+                k = 0
+            counts.append(k)
+    log(f"  real photos: {len(blade_iou)} evaluated, {len(errors)} unreadable")
+    return {"photos": len(blade_iou), "unreadable": errors,
+            "blade_iou": float(np.mean(blade_iou)) if blade_iou else None,
+            "tower_iou": float(np.mean(tower_iou)) if tower_iou else None,
+            "front_views": len(counts),
+            "front_blade_count_3": (sum(c == 3 for c in counts) / len(counts)) if counts else None,
+            "front_blade_counts": counts}
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=300)
+    ap.add_argument("--width", type=int, default=640)
+    ap.add_argument("--height", type=int, default=480)
+    ap.add_argument("--model", default=None)
+    ap.add_argument("--real", default=str(ROOT.parent / "shared" / "real-photos"))
+    ap.add_argument("--speed-runs", type=int, default=5)
+    ap.add_argument("--no-stock", action="store_true", help="skip the stock R50-FPN timing")
+    ap.add_argument("--threads", type=int, default=None)
+    ap.add_argument("--max-minutes", type=float, default=None,
+                    help="stop the synthetic part after this long (the N reached is reported)")
+    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "segment_accuracy.json"))
+    a = ap.parse_args(argv)
+    if a.threads:
+        torch.set_num_threads(a.threads)
+
+    def log(msg: str) -> None:
+        print(msg, file=sys.stderr, flush=True)
+
+    weights = resolve_weights(a.model)
+    model = load_model(weights, "cpu")
+    result: dict = {"model": str(weights.relative_to(ROOT) if weights.is_relative_to(ROOT) else weights)}
+    log(f"speed ({a.speed_runs} runs each)")
+    result["speed"] = speed(model, a.speed_runs, not a.no_stock)
+    real = Path(a.real)
+    if real.is_dir():
+        result["real"] = real_photos(model, real, log)
+    else:
+        result["real"] = None
+        log(f"  {real}: not here, real-photo figures skipped")
+    if a.n > 0:
+        log(f"held-out synthetic set: {a.n} images")
+        result["synthetic"] = synthetic(model, a.n, a.width, a.height, log, a.max_minutes)
+    write_json(a.out, document("wtinspect.benchmark.segment_accuracy", 1, result))
+    import json
+
+    print(json.dumps(result, indent=1, default=str))
+    return result
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,102 @@
+"""train: a tiny run on renders and on a COCO folder, checkpoint + resume, config errors,
+augmentation keeps masks and image aligned, LR schedule."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from wtcli.errors import ConfigError, ExitCode, InputError
+from wtcli.masks import Instances, write_instances
+from wtcli.segment import data as D
+from wtcli.segment.model import build_model, load_weights
+from wtcli.segment.train import TrainConfig, export_checkpoint, lr_factor, train
+
+
+def _tiny(tmp_path, **kw) -> TrainConfig:
+    base = dict(out=str(tmp_path / "run"), iterations=2, width=96, height=72, eval_count=1,
+                workers=0, checkpoint_every=1, warmup=1)
+    base.update(kw)
+    return TrainConfig(**base)
+
+
+def test_tiny_run_then_resume(tmp_path):
+    seen = []
+    s = train(_tiny(tmp_path), progress=seen.append)
+    assert s["iterations"] == 2 and [r["iteration"] for r in seen] == [1, 2]
+    assert all(np.isfinite(r["loss"]) for r in seen)
+    run = tmp_path / "run"
+    assert {"last.ckpt", "model.pt", "metrics.json"} <= {p.name for p in run.iterdir()}
+    m = json.loads((run / "metrics.json").read_text())
+    assert m["schema"] == "wtinspect.train_metrics" and "blade_mask_iou" in m["evaluation"]
+    load_weights(build_model(), run / "model.pt")
+    s2 = train(_tiny(tmp_path, iterations=3, resume=True, eval_count=0), progress=seen.append)
+    assert s2["iterations"] == 3 and seen[-1]["iteration"] == 3
+    export_checkpoint(run / "last.ckpt", tmp_path / "exported.pt")
+    meta = load_weights(build_model(), tmp_path / "exported.pt")
+    assert meta["iterations"] == 3
+
+
+def test_resume_without_checkpoint_is_input_error(tmp_path):
+    with pytest.raises(InputError, match="last.ckpt"):
+        train(_tiny(tmp_path, resume=True))
+
+
+@pytest.mark.parametrize("kw", [{"iterations": 0}, {"lr": -1.0}, {"width": 8}, {"batch_size": 0}])
+def test_bad_config(tmp_path, kw):
+    with pytest.raises(ConfigError):
+        train(_tiny(tmp_path, **kw))
+
+
+def test_train_on_coco_folder(tmp_path):
+    import cv2
+
+    d = tmp_path / "ds"
+    (d / "images").mkdir(parents=True)
+    images, per = [], []
+    for k in range(2):
+        s = D.render(D.TRAIN_SEED_BASE + k, 96, 72)
+        cv2.imwrite(str(d / "images" / f"{k}.png"), s.image)
+        images.append({"id": k + 1, "file_name": f"{k}.png", "width": 96, "height": 72})
+        per.append(s.instances)
+    write_instances(d / "instances.json", images, per)
+    s = train(_tiny(tmp_path, data=str(d), train_sizes=(72,), eval_count=0))
+    assert s["iterations"] == 2 and s["config"]["data"] == str(d)
+
+
+def test_augment_keeps_masks_aligned():
+    img = np.zeros((60, 80, 3), np.uint8)
+    m = np.zeros((1, 60, 80), bool)
+    m[10:30, 20:60] = True
+    img[m[0]] = 255
+    for seed in range(10):
+        out = D.augment(D.Sample(img, Instances(np.array(["tower"], dtype=object), m)),
+                        np.random.default_rng(seed))
+        assert out.image.shape == img.shape
+        if len(out.instances):
+            mm = out.instances.masks[0]
+            grey = out.image.mean(axis=2)
+            assert grey[mm].mean() > grey[~mm].mean() + 60, seed
+
+
+def test_to_target_types():
+    s = D.render(D.TRAIN_SEED_BASE, 96, 72)
+    x, t = D.to_target(s)
+    assert x.shape == (3, 72, 96) and x.dtype == torch.float32 and 0 <= float(x.min()) <= float(x.max()) <= 1
+    assert t["boxes"].shape == (len(t["labels"]), 4) and t["masks"].dtype == torch.uint8
+    assert set(t["labels"].tolist()) <= {1, 2, 3}
+
+
+def test_lr_schedule():
+    assert lr_factor(0.0, 0, 100) == pytest.approx(0.01)
+    assert lr_factor(0.0, 200, 100) == pytest.approx(1.0)
+    assert lr_factor(1.0, 10_000, 100) == pytest.approx(0.02)
+    assert lr_factor(0.5, 10_000, 100) == pytest.approx(0.51)
+
+
+def test_cli_train_bad_data_exit_3(cli, tmp_path):
+    res = cli("train", "--data", tmp_path / "nothing", "--out", tmp_path / "r")
+    assert res.exit_code == ExitCode.INPUT

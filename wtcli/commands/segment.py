@@ -1,0 +1,83 @@
+"""`wtinspect segment IMAGE|FOLDER`: blade, tower and nacelle masks with the shipped Mask R-CNN;
+instances JSON, background-removed image and overlay per photo (docs/segment.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+
+def segment(
+    path: Path = typer.Argument(..., metavar="IMAGE|FOLDER",
+                                help="A photo (jpg/png/tif) or a folder of them."),
+    out: Path = typer.Option(Path("segment-out"), "--out", "-o",
+                             help="Output folder (created): instances.json, report.json, "
+                                  "instances/, background_removed/, overlay/."),
+    score_threshold: float = typer.Option(0.5, "--score-threshold", min=0.0, max=1.0,
+                                          help="Keep instances scoring at least this."),
+    max_size: int = typer.Option(1600, "--max-size", min=64,
+                                 help="Downscale larger photos to this long side for inference; "
+                                      "masks are scaled back to the photo's size."),
+    device: str = typer.Option("auto", "--device", help="auto (GPU if present) | cpu | cuda[:N]."),
+    model: Optional[Path] = typer.Option(None, "--model", "-m",
+                                         help="Weights file (default: models/wtseg-r18s.pt)."),
+    recursive: bool = typer.Option(False, "--recursive", "-r", help="Look in subfolders too."),
+    resume: bool = typer.Option(False, "--resume",
+                                help="Skip photos whose outputs already exist in --out."),
+    json_out: bool = typer.Option(False, "--json", help="Print the batch report JSON on stdout."),
+) -> None:
+    """Segment photos into blade, tower and nacelle instances (paper step 1)."""
+    from rich.table import Table
+
+    from wtcli.console import err_console, make_progress
+    from wtcli.errors import InputError, PartialFailure
+    from wtcli.jsonio import dumps
+    from wtcli.segment.batch import find_images, segment_paths, write_batch_files
+    from wtcli.segment.infer import load_model, predict
+    from wtcli.segment.model import resolve_weights
+
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out}: exists and is not a folder; choose another --out")
+    _, files = find_images(path, recursive)  # errors (no such path, empty folder) before loading
+    weights = resolve_weights(model)
+    net = load_model(weights, device)
+
+    def run(img):
+        return predict(net, img, score_threshold=score_threshold, max_size=max_size)
+
+    with make_progress() as progress:
+        task = progress.add_task("segment", total=len(files), status="")
+
+        def step(res) -> None:
+            progress.update(task, advance=1, status=f"{res.rel} {res.status}")
+
+        results = segment_paths(path, out, run, recursive=recursive, resume=resume, on_progress=step)
+    settings = {"score_threshold": score_threshold, "max_size": max_size, "model": str(weights),
+                "device": str(next(net.parameters()).device)}
+    report = write_batch_files(out, results, settings)
+
+    table = Table(title=f"segment -> {out}/", title_justify="left")
+    for col in ("file", "status", "blades", "towers", "nacelles", "note"):
+        table.add_column(col)
+    shown = results if len(results) <= 40 else [r for r in results if r.status == "error"][:40]
+    for r in shown:
+        c = r.counts
+        table.add_row(r.rel, "[red]error[/red]" if r.status == "error" else r.status,
+                      str(c.get("blade", "")), str(c.get("tower", "")), str(c.get("nacelle", "")),
+                      (r.error or "")[:80])
+    err_console.print(table)
+    bad = report["n_failed"]
+    err_console.print(f"{len(results) - bad}/{len(results)} image(s) segmented"
+                      + (f" ({report['n_skipped']} already done)" if report["n_skipped"] else ""))
+    if json_out:
+        typer.echo(dumps(report))
+    if bad:
+        if len(results) == 1 and path.is_file():
+            raise InputError(results[0].error)
+        raise PartialFailure(f"{bad} of {len(results)} images failed (see {out}/report.json)")
+
+
+def register(app: typer.Typer) -> None:
+    app.command("segment")(segment)

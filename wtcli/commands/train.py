@@ -1,0 +1,87 @@
+"""`wtinspect train`: train (or fine-tune) the segmenter on synthetic renders or a COCO dataset
+(docs/train.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+
+def train(
+    out: Path = typer.Option(Path("runs/train"), "--out", "-o",
+                             help="Run folder: last.ckpt (resumable), model.pt, metrics.json."),
+    data: Optional[Path] = typer.Option(None, "--data",
+                                        help="COCO instances JSON (or a folder with instances.json, "
+                                             "e.g. from `synth`); default: renders made on the fly."),
+    iterations: int = typer.Option(2000, "--iterations", "-n", help="Optimizer steps in all."),
+    batch_size: int = typer.Option(2, "--batch-size", help="Images per step."),
+    lr: float = typer.Option(1e-3, "--lr", help="Peak AdamW learning rate."),
+    warmup: int = typer.Option(200, "--warmup", help="Linear warm-up steps."),
+    max_minutes: Optional[float] = typer.Option(None, "--max-minutes",
+                                                help="Stop after this long (the LR schedule "
+                                                     "follows whichever ends first)."),
+    width: int = typer.Option(640, "--width", help="Synthetic render width."),
+    height: int = typer.Option(480, "--height", help="Synthetic render height."),
+    seed: int = typer.Option(0, "--seed", help="Seed of initialisation, order and augmentation."),
+    init: Optional[Path] = typer.Option(None, "--init",
+                                        help="Start from these weights (fine-tuning), e.g. "
+                                             "models/wtseg-r18s.pt; default: random."),
+    checkpoint_every: int = typer.Option(100, "--checkpoint-every", help="Steps between checkpoints."),
+    eval_count: int = typer.Option(16, "--eval-count",
+                                   help="Held-out images evaluated at the end (0: none)."),
+    val: Optional[Path] = typer.Option(None, "--val", help="COCO dataset to evaluate on."),
+    device: str = typer.Option("auto", "--device", help="auto (GPU if present) | cpu | cuda[:N]."),
+    workers: int = typer.Option(1, "--workers", help="Data-loading processes (0: in the main one)."),
+    threads: Optional[int] = typer.Option(None, "--threads", min=1,
+                                          help="CPU threads for torch (default 1: fastest on a "
+                                               "shared CPU; raise it on an idle many-core one)."),
+    no_augment: bool = typer.Option(False, "--no-augment", help="Train on the images as they are."),
+    resume: bool = typer.Option(False, "--resume", help="Continue from OUT/last.ckpt."),
+    json_out: bool = typer.Option(False, "--json", help="Print the run summary JSON on stdout."),
+) -> None:
+    """Train the blade/tower/nacelle Mask R-CNN; resumable; evaluates at the end."""
+    from rich.table import Table
+
+    from wtcli.console import err_console, make_progress
+    from wtcli.errors import InputError
+    from wtcli.jsonio import document, dumps
+    from wtcli.segment.train import TRAIN_SCHEMA, TrainConfig
+    from wtcli.segment.train import train as run_training
+
+    if data is not None and not data.exists():
+        raise InputError(f"{data}: no such dataset (a COCO instances JSON or a folder with one)")
+    cfg = TrainConfig(out=str(out), data=str(data) if data else None, iterations=iterations,
+                      batch_size=batch_size, lr=lr, warmup=warmup, max_minutes=max_minutes,
+                      width=width, height=height, seed=seed, init=str(init) if init else None,
+                      checkpoint_every=checkpoint_every, eval_count=eval_count,
+                      val=str(val) if val else None, device=device, workers=workers, threads=threads,
+                      augment=not no_augment, resume=resume)
+    with make_progress() as progress:
+        task = progress.add_task("train", total=iterations, status="")
+
+        def step(rec: dict) -> None:
+            progress.update(task, completed=rec["iteration"],
+                            status=f"loss {rec['loss']:.3f} (mask {rec.get('loss_mask', 0):.3f}, "
+                                   f"cls {rec.get('loss_classifier', 0):.3f}) lr {rec['lr']:.1e}")
+
+        summary = run_training(cfg, progress=step)
+    ev = summary.get("evaluation") or {}
+    if ev:
+        table = Table(title=f"evaluation on {ev.get('images')} held-out image(s)", title_justify="left")
+        for col in ("class", "mask IoU", "AP50"):
+            table.add_column(col)
+        for label in ("blade", "tower", "nacelle"):
+            iou, ap = ev.get(f"{label}_mask_iou"), ev.get(f"{label}_ap50")
+            table.add_row(label, "-" if iou is None else f"{iou:.3f}", "-" if ap is None else f"{ap:.3f}")
+        err_console.print(table)
+    err_console.print(f"{summary['iterations']} iterations in {summary['train_seconds']:.0f} s on "
+                      f"{summary['device']}; weights -> {summary['weights']}, resume from "
+                      f"{summary['checkpoint']}")
+    if json_out:
+        typer.echo(dumps(document(TRAIN_SCHEMA, 1, summary)))
+
+
+def register(app: typer.Typer) -> None:
+    app.command("train")(train)

@@ -1,0 +1,166 @@
+"""Segment one photo or a folder of photos into files (the library half of `wtinspect segment`).
+
+For each image ``REL`` (its path relative to the input folder, or its name), under ``OUT``:
+
+- ``instances/REL.json``: that image's instances (COCO-compatible, uncompressed RLE, scores,
+  boxes), written when the image is done; ``--resume`` skips images whose three files exist;
+- ``background_removed/REL.png``: I_t, the photo with everything but the turbine black;
+- ``overlay/REL.png``: the photo with the instances drawn on it;
+
+and once the batch ends, ``instances.json`` (every finished image in one COCO file, ready for
+``contours`` and ``pitch``) and ``report.json`` (per file: ok / error, counts, outputs).
+Every file is written atomically. A failing image is recorded and the batch goes on.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import cv2
+import numpy as np
+
+from wtcli.errors import InputError, WtError
+from wtcli.jsonio import atomic_write_bytes, document, write_json
+from wtcli.masks import LABELS, Instances, instances_document, read_instances, write_instances
+
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff")
+REPORT_SCHEMA = "wtinspect.segment_report"
+
+
+@dataclass
+class ImageResult:
+    rel: str  # path relative to the input folder (or the file name of a single image)
+    source: str
+    status: str  # "ok" | "skipped" (resumed) | "error"
+    error: str | None = None
+    counts: dict[str, int] = field(default_factory=dict)
+    width: int = 0
+    height: int = 0
+    instances: Instances | None = None
+
+    def to_dict(self, out: Path) -> dict[str, Any]:
+        d = {"file": self.rel, "source": self.source, "status": self.status, "error": self.error,
+             "counts": self.counts, "width": self.width, "height": self.height}
+        if self.status != "error":
+            d["outputs"] = {k: str(v) for k, v in output_paths(out, self.rel).items()}
+        return d
+
+
+def find_images(path: Path, recursive: bool = False) -> tuple[Path, list[Path]]:
+    """(root, images): a single image -> (its folder, [it]); a folder -> its jpg/png/tif files."""
+    if not path.exists():
+        raise InputError(f"{path}: no such file or folder")
+    if path.is_file():
+        if path.suffix.lower() not in IMAGE_SUFFIXES:
+            raise InputError(f"{path}: not an image (expected {', '.join(IMAGE_SUFFIXES)})")
+        return path.parent, [path]
+    it = path.rglob("*") if recursive else path.iterdir()
+    files = sorted(p for p in it if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES
+                   and not any(part.startswith(".") for part in p.relative_to(path).parts))
+    if not files:
+        hint = "" if recursive else " (add --recursive to look in subfolders)"
+        raise InputError(f"{path}: no images ({', '.join(IMAGE_SUFFIXES)}) in this folder{hint}")
+    return path, files
+
+
+def output_paths(out: Path, rel: str) -> dict[str, Path]:
+    stem = str(Path(rel).with_suffix(""))
+    return {"instances": out / "instances" / f"{stem}.json",
+            "background_removed": out / "background_removed" / f"{stem}.png",
+            "overlay": out / "overlay" / f"{stem}.png"}
+
+
+def read_image(path: Path) -> np.ndarray:
+    """BGR uint8 [H, W, 3]; 16-bit and grey TIFFs are converted; anything else is InputError."""
+    try:
+        data = np.fromfile(str(path), dtype=np.uint8)
+    except OSError as e:
+        raise InputError(f"{path}: cannot read ({e.__class__.__name__})") from None
+    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    if img is None:
+        raise InputError(f"{path}: not a readable image (corrupt or unsupported format)")
+    if img.dtype == np.uint16:
+        img = (img / 257).astype(np.uint8)
+    elif img.dtype != np.uint8:
+        raise InputError(f"{path}: unsupported pixel type {img.dtype}")
+    if img.ndim == 2:
+        img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+    elif img.shape[2] == 4:
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
+    return img
+
+
+def _png(img: np.ndarray) -> bytes:
+    ok, buf = cv2.imencode(".png", img)
+    if not ok:
+        raise InputError("could not encode a PNG")
+    return buf.tobytes()
+
+
+def counts_of(inst: Instances) -> dict[str, int]:
+    return {l: int((inst.labels == l).sum()) for l in LABELS}
+
+
+def segment_paths(path: Path, out: Path, segment: Callable[[np.ndarray], Instances],
+                  recursive: bool = False, resume: bool = False,
+                  on_progress: Callable[[ImageResult], None] | None = None) -> list[ImageResult]:
+    """Run ``segment`` (BGR image -> Instances) over an image or folder, writing the files above."""
+    root, files = find_images(path, recursive)
+    results: list[ImageResult] = []
+    for f in files:
+        rel = str(f.relative_to(root)) if path.is_dir() else f.name
+        outs = output_paths(out, rel)
+        res = ImageResult(rel=rel, source=str(f), status="ok")
+        try:
+            if resume and all(p.is_file() for p in outs.values()):
+                (img_rec, inst), = read_instances(outs["instances"])
+                res.status, res.instances = "skipped", inst
+                res.width, res.height = int(img_rec["width"]), int(img_rec["height"])
+            else:
+                img = read_image(f)
+                inst = segment(img)
+                res.instances = inst
+                res.height, res.width = img.shape[:2]
+                from wtcli.segment.infer import overlay, remove_background
+
+                atomic_write_bytes(outs["background_removed"], _png(remove_background(img, inst)))
+                atomic_write_bytes(outs["overlay"], _png(overlay(img, inst)))
+                # The instances file last: its presence marks the image as done for --resume.
+                write_instances(outs["instances"], [_image_record(1, rel, f, res)], [inst])
+            res.counts = counts_of(res.instances)
+        except WtError as e:
+            res.status, res.error, res.instances = "error", str(e), None
+        except (ValueError, OSError, cv2.error, MemoryError) as e:
+            res.status, res.error, res.instances = "error", f"{e.__class__.__name__}: {e}", None
+        results.append(res)
+        if on_progress:
+            on_progress(res)
+    return results
+
+
+def _image_record(iid: int, rel: str, src: Path, res: ImageResult) -> dict[str, Any]:
+    return {"id": iid, "file_name": rel, "path": str(src), "width": res.width, "height": res.height}
+
+
+def write_batch_files(out: Path, results: list[ImageResult], settings: dict[str, Any]) -> dict[str, Any]:
+    """The combined instances.json (finished images) and report.json; returns the report."""
+    done = [r for r in results if r.instances is not None]
+    images = [_image_record(k + 1, r.rel, Path(r.source), r) for k, r in enumerate(done)]
+    if done:
+        write_instances(out / "instances.json", images, [r.instances for r in done],
+                        extra={"settings": settings})
+    report = document(REPORT_SCHEMA, 1, {
+        "settings": settings,
+        "images": [r.to_dict(out) for r in results],
+        "n_images": len(results), "n_failed": sum(r.status == "error" for r in results),
+        "n_skipped": sum(r.status == "skipped" for r in results),
+        "instances": str(out / "instances.json") if done else None,
+    })
+    write_json(out / "report.json", report)
+    return report
+
+
+__all__ = ["IMAGE_SUFFIXES", "ImageResult", "find_images", "output_paths", "read_image",
+           "segment_paths", "write_batch_files", "instances_document"]

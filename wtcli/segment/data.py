@@ -1,0 +1,200 @@
+"""Training data for the segmenter: synthetic renders made on the fly, or a COCO instances
+dataset on disk (ours from `synth`, or the user's own annotated photos), plus augmentation.
+
+Images are BGR uint8 [H, W, 3] (OpenCV) until ``to_target`` turns them into the RGB float
+tensors [3, H, W] in [0, 1] and target dicts (boxes xyxy float, labels 1..3, masks uint8)
+torchvision's Mask R-CNN trains on.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+
+from wtcli.errors import InputError
+from wtcli.masks import LABELS, Instances, read_instances
+
+TRAIN_SEED_BASE = 1_000_000  # synthetic training scenes use seeds TRAIN_SEED_BASE + i
+HELDOUT_SEED_BASE = 9_000_000  # benchmarks only; never trained on
+MIN_INSTANCE_PIXELS = 24
+
+
+@dataclass(frozen=True)
+class Sample:
+    image: np.ndarray  # BGR uint8 [H, W, 3]
+    instances: Instances
+
+
+# ---- sources -------------------------------------------------------------------------------
+def _fallback_render(seed: int, width: int, height: int, view: str | None = None) -> Sample:
+    """Masks from the one geometry on a plain gradient sky: used only when the synthetic
+    renderer (wtcli.synth.render) is not importable, e.g. while developing the trainer."""
+    from wtcli.geometry.render import instance_masks
+    from wtcli.synth.scene import sample_scene
+
+    rng = np.random.default_rng(seed)
+    scene = sample_scene(rng, width, height, view)
+    top, bottom = rng.uniform(120, 255, 3), rng.uniform(60, 230, 3)
+    t = np.linspace(0, 1, height)[:, None, None]
+    img = (top * (1 - t) + bottom * t) * np.ones((1, width, 1))
+    inst = instance_masks(scene.turbine, scene.camera, min_pixels=MIN_INSTANCE_PIXELS)
+    grey = rng.uniform(170, 250)
+    for label, _, m in inst:
+        img[m] = grey * {"blade": 1.0, "tower": 0.93, "nacelle": 0.85}[label] + rng.normal(0, 4, 3)
+    img = np.clip(img + rng.normal(0, 3, img.shape), 0, 255).astype(np.uint8)
+    if not inst:
+        return Sample(img, Instances.empty(height, width))
+    return Sample(img, Instances(np.array([i[0] for i in inst], dtype=object),
+                                 np.stack([i[2] for i in inst])))
+
+
+def render(seed: int, width: int, height: int, view: str | None = None) -> Sample:
+    """One synthetic scene: wtcli.synth.render.render_sample when available."""
+    try:
+        from wtcli.synth.render import render_sample
+    except ImportError:
+        return _fallback_render(seed, width, height, view)
+    s = render_sample(seed, width=width, height=height, view=view)
+    return Sample(s.image, s.instances)
+
+
+class SynthDataset(torch.utils.data.Dataset):
+    """Scene ``i`` is the render of seed ``seed_base + i`` (deterministic, nothing stored)."""
+
+    def __init__(self, length: int, width: int = 640, height: int = 480,
+                 seed_base: int = TRAIN_SEED_BASE, augment: bool = True, aug_seed: int = 0):
+        self.length, self.width, self.height = int(length), int(width), int(height)
+        self.seed_base, self.augment, self.aug_seed = int(seed_base), augment, int(aug_seed)
+
+    def __len__(self) -> int:
+        return self.length
+
+    def __getitem__(self, i: int):
+        s = render(self.seed_base + int(i), self.width, self.height)
+        if self.augment:
+            s = augment(s, np.random.default_rng((self.aug_seed, self.seed_base + int(i))))
+        return to_target(s)
+
+
+class CocoDataset(torch.utils.data.Dataset):
+    """A COCO instances JSON with our three category names; image files next to it, in
+    ``images/``, or at their ``file_name`` path."""
+
+    def __init__(self, path: str | Path, augment: bool = True, aug_seed: int = 0):
+        path = Path(path)
+        if path.is_dir():
+            path = path / "instances.json"
+        self.path, self.root = path, path.parent
+        self.items = read_instances(path)
+        if not self.items:
+            raise InputError(f"{path}: the dataset has no images")
+        self.augment, self.aug_seed, self.epoch = augment, int(aug_seed), 0
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def image_path(self, info: dict) -> Path:
+        name = str(info.get("file_name", ""))
+        for cand in (self.root / name, self.root / "images" / name, Path(name)):
+            if cand.is_file():
+                return cand
+        raise InputError(f"{self.path}: image {name!r} not found next to it or in images/")
+
+    def load(self, i: int) -> Sample:
+        info, inst = self.items[i]
+        p = self.image_path(info)
+        img = cv2.imread(str(p), cv2.IMREAD_COLOR)
+        if img is None:
+            raise InputError(f"{p}: not a readable image")
+        if img.shape[:2] != inst.image_size:
+            raise InputError(f"{p}: image is {img.shape[1]}x{img.shape[0]} but its annotations "
+                             f"say {inst.image_size[1]}x{inst.image_size[0]}")
+        return Sample(img, inst)
+
+    def __getitem__(self, i: int):
+        s = self.load(i)
+        if self.augment:
+            s = augment(s, np.random.default_rng((self.aug_seed, self.epoch, int(i))))
+        return to_target(s)
+
+
+# ---- augmentation --------------------------------------------------------------------------
+def augment(s: Sample, rng: np.random.Generator) -> Sample:
+    """Photometric and geometric jitter on top of the renderer's own randomisation:
+    horizontal flip, crop-and-rescale, brightness/contrast/saturation, blur, noise, JPEG."""
+    img, inst = s.image, s.instances
+    masks, labels = inst.masks, inst.labels
+    h, w = img.shape[:2]
+    if rng.random() < 0.5:
+        img, masks = img[:, ::-1], masks[:, :, ::-1]
+    if rng.random() < 0.3:  # crop a part and scale it back to full size (closer views)
+        f = rng.uniform(0.6, 0.95)
+        ch, cw = int(h * f), int(w * f)
+        y0, x0 = int(rng.integers(0, h - ch + 1)), int(rng.integers(0, w - cw + 1))
+        img = cv2.resize(np.ascontiguousarray(img[y0:y0 + ch, x0:x0 + cw]), (w, h),
+                         interpolation=cv2.INTER_LINEAR)
+        masks = np.stack([cv2.resize(np.ascontiguousarray(m[y0:y0 + ch, x0:x0 + cw]).astype(np.uint8),
+                                     (w, h), interpolation=cv2.INTER_NEAREST).astype(bool)
+                          for m in masks]) if len(masks) else np.zeros((0, h, w), bool)
+    img = np.ascontiguousarray(img).astype(np.float32)
+    if rng.random() < 0.8:
+        img = img * rng.uniform(0.7, 1.3) + rng.uniform(-25, 25)
+        mean = img.mean(axis=(0, 1), keepdims=True)
+        img = (img - mean) * rng.uniform(0.75, 1.25) + mean
+    if rng.random() < 0.4:
+        grey = img.mean(axis=2, keepdims=True)
+        img = grey + (img - grey) * rng.uniform(0.4, 1.4)
+    if rng.random() < 0.25:
+        k = int(rng.choice([3, 5]))
+        img = cv2.GaussianBlur(img, (k, k), 0)
+    if rng.random() < 0.4:
+        img = img + rng.normal(0, rng.uniform(2, 9), img.shape).astype(np.float32)
+    img = np.clip(img, 0, 255).astype(np.uint8)
+    if rng.random() < 0.3:
+        ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, int(rng.integers(35, 90))])
+        if ok:
+            img = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+    keep = masks.reshape(len(masks), -1).sum(axis=1) >= MIN_INSTANCE_PIXELS if len(masks) else []
+    if len(masks) and not np.all(keep):
+        masks, labels = masks[keep], labels[keep]
+    if not len(masks):
+        return Sample(img, Instances.empty(h, w))
+    return Sample(img, Instances(labels, np.ascontiguousarray(masks)))
+
+
+# ---- tensors -------------------------------------------------------------------------------
+def image_tensor(image_bgr: np.ndarray) -> torch.Tensor:
+    """BGR uint8 [H, W, 3] -> RGB float [3, H, W] in [0, 1]."""
+    rgb = np.ascontiguousarray(image_bgr[:, :, ::-1])
+    return torch.from_numpy(rgb).permute(2, 0, 1).float().div_(255.0)
+
+
+def to_target(s: Sample) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    inst = s.instances
+    h, w = s.image.shape[:2]
+    if len(inst):
+        big = inst.masks.reshape(len(inst), -1).sum(axis=1) >= MIN_INSTANCE_PIXELS
+        inst = inst[big] if not big.all() else inst
+    n = len(inst)
+    if n:
+        boxes = np.array([_box(m) for m in inst.masks], np.float32)
+        labels = np.array([LABELS.index(l) + 1 for l in inst.labels], np.int64)
+        masks = torch.from_numpy(inst.masks.astype(np.uint8))
+    else:
+        boxes, labels = np.zeros((0, 4), np.float32), np.zeros(0, np.int64)
+        masks = torch.zeros((0, h, w), dtype=torch.uint8)
+    return image_tensor(s.image), {"boxes": torch.from_numpy(boxes), "labels": torch.from_numpy(labels),
+                                   "masks": masks}
+
+
+def _box(m: np.ndarray) -> list[float]:
+    ys, xs = np.nonzero(m)
+    return [float(xs.min()), float(ys.min()), float(xs.max() + 1), float(ys.max() + 1)]
+
+
+def collate(batch):
+    return tuple(zip(*batch))

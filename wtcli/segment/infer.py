@@ -1,0 +1,139 @@
+"""Run the segmenter on one image: BGR uint8 [H, W, 3] in, ``wtcli.masks.Instances`` out.
+
+Large photos (a 5472x3648 drone frame) are first downscaled so their longer side is at most
+``max_size`` (the network itself works at about 640 px, see ``wtcli.segment.model``); the
+predicted soft masks are then resized back and thresholded at 0.5, so masks, boxes and the
+background-removed image are always at the ORIGINAL image size and line up with the photo.
+Masks are upscaled one instance at a time, so memory stays at a few copies of one full-size
+mask.
+"""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+
+from wtcli.errors import InputError
+from wtcli.masks import LABELS, Instances
+from wtcli.segment.data import image_tensor
+from wtcli.segment.model import build_model, load_weights, pick_device, resolve_weights, set_infer_size
+
+DEFAULT_MAX_SIZE = 1600
+DEFAULT_SCORE_THRESHOLD = 0.5
+
+_CACHE: dict[tuple, torch.nn.Module] = {}
+_LOCK = threading.Lock()
+
+
+def load_model(weights: str | Path | None = None, device: str | torch.device | None = None):
+    """Build the network and load weights (default: the shipped ``models/`` file); cached per
+    (path, device), so a batch or a chained command loads it once."""
+    dev = device if isinstance(device, torch.device) else pick_device(device)
+    path = resolve_weights(weights)
+    stamp = path.stat().st_mtime_ns if path.is_file() else None
+    key = (str(path.resolve()) if path.exists() else str(path), str(dev), stamp)
+    with _LOCK:
+        if key not in _CACHE:
+            model = build_model()
+            load_weights(model, path)
+            set_infer_size(model)
+            model.eval().to(dev)
+            _CACHE[key] = model
+        return _CACHE[key]
+
+
+def _device_of(model: torch.nn.Module) -> torch.device:
+    return next(model.parameters()).device
+
+
+def predict(model: torch.nn.Module, image_bgr: np.ndarray, score_threshold: float = DEFAULT_SCORE_THRESHOLD,
+            max_size: int | None = DEFAULT_MAX_SIZE, device=None) -> Instances:
+    """Instances (labels, masks at the image's size, scores, boxes xyxy) with score >= threshold."""
+    img = np.asarray(image_bgr)
+    if img.ndim == 2:
+        img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+    if img.ndim != 3 or img.shape[2] not in (3, 4) or img.dtype != np.uint8:
+        raise InputError(f"expected a BGR uint8 image [H, W, 3], got {img.dtype} {img.shape}")
+    if img.shape[2] == 4:
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
+    if not 0.0 <= score_threshold <= 1.0:
+        raise InputError(f"expected a score threshold in [0, 1], got {score_threshold}")
+    H, W = img.shape[:2]
+    if H < 8 or W < 8:
+        raise InputError(f"image is too small ({W}x{H})")
+    scale = 1.0
+    if max_size and max(H, W) > max_size:
+        scale = max_size / max(H, W)
+        img = cv2.resize(img, (max(1, round(W * scale)), max(1, round(H * scale))),
+                         interpolation=cv2.INTER_AREA)
+    dev = _device_of(model) if device is None else torch.device(device)
+    model.eval()
+    with torch.inference_mode():
+        out = model([image_tensor(img).to(dev)])[0]
+    scores = out["scores"].float().cpu().numpy()
+    keep = scores >= score_threshold
+    if not keep.any():
+        return Instances.empty(H, W)
+    labels = out["labels"].cpu().numpy()[keep]
+    soft = out["masks"][keep, 0].float().cpu().numpy()  # [N, h, w] at the working size
+    boxes = out["boxes"].float().cpu().numpy()[keep] / scale
+    masks = np.zeros((len(soft), H, W), bool)
+    for i, m in enumerate(soft):
+        if scale != 1.0:
+            m = cv2.resize(m, (W, H), interpolation=cv2.INTER_LINEAR)
+        masks[i] = m >= 0.5
+    boxes[:, [0, 2]] = boxes[:, [0, 2]].clip(0, W)
+    boxes[:, [1, 3]] = boxes[:, [1, 3]].clip(0, H)
+    names = np.array([LABELS[int(c) - 1] for c in labels], dtype=object)
+    return Instances(names, masks, scores[keep].clip(0, 1), boxes)
+
+
+def segment_image(image_bgr: np.ndarray, model: torch.nn.Module | None = None,
+                  score_threshold: float = DEFAULT_SCORE_THRESHOLD, max_size: int | None = DEFAULT_MAX_SIZE,
+                  device: str | None = None, weights: str | Path | None = None) -> Instances:
+    """The one call other stages use: segment a BGR photo with the shipped model (loaded lazily
+    and cached) or the ``model`` given."""
+    if model is None:
+        model = load_model(weights, device)
+    return predict(model, image_bgr, score_threshold, max_size)
+
+
+def remove_background(image_bgr: np.ndarray, inst: Instances) -> np.ndarray:
+    """I_t of the paper (step 1.2): the image where any instance is, black elsewhere."""
+    union = inst.union().astype(np.uint8) * 255
+    return cv2.bitwise_and(image_bgr, image_bgr, mask=union)
+
+
+COLORS = {"blade": (40, 200, 255), "tower": (255, 140, 40), "nacelle": (80, 220, 80)}  # BGR
+
+
+def overlay(image_bgr: np.ndarray, inst: Instances, alpha: float = 0.45) -> np.ndarray:
+    """The photo with each instance tinted by class, outlined, and labelled with its score."""
+    out = image_bgr.copy()
+    for i in np.argsort(-inst.masks.reshape(len(inst), -1).sum(axis=1)) if len(inst) else []:
+        m, label = inst.masks[i], inst.labels[i]
+        col = np.array(COLORS[label], np.float32)
+        out[m] = (out[m] * (1 - alpha) + col * alpha).astype(np.uint8)
+        cs, _ = cv2.findContours(m.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        thick = max(1, round(max(out.shape[:2]) / 500))
+        cv2.drawContours(out, cs, -1, COLORS[label], thick, cv2.LINE_AA)
+        x0, y0 = (int(v) for v in inst.boxes[i][:2])
+        cv2.putText(out, f"{label} {inst.scores[i]:.2f}", (x0 + 2, max(12, y0 + 12)),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.4 * thick, COLORS[label], thick, cv2.LINE_AA)
+    return out
+
+
+def segment_photo(path: str | Path, **kw) -> tuple[dict, Instances]:
+    """Read a photo file and segment it: (image record {file_name, path, width, height},
+    instances). Keywords go to ``segment_image``. An unreadable file is an InputError."""
+    from wtcli.segment.batch import read_image
+
+    path = Path(path)
+    img = read_image(path)
+    rec = {"id": 1, "file_name": path.name, "path": str(path), "width": int(img.shape[1]),
+           "height": int(img.shape[0])}
+    return rec, segment_image(img, **kw)

@@ -1,0 +1,169 @@
+"""The segmentation model: a slim torchvision Mask R-CNN for blade, tower and nacelle.
+
+Two steps, never one (STYLE.md 5): ``build_model()`` makes the network with no weights at all
+(``weights=None``, nothing is downloaded), ``load_weights()`` fills it from a file in
+``models/`` with ``torch.load(..., weights_only=True)``. Tests build the model without weights
+and check the output contract.
+
+Architecture (chosen by measuring on 2 CPU cores, see models/README.md): a ResNet-18 trunk
+whose last stage is slimmed to 256 channels, a 128-channel FPN on strides 8/16/32 (+ pooled 64),
+a box head of two 256-unit layers, and a mask head of two 128-channel convs. Plain
+BatchNorm in the trunk (trained from scratch, two images a batch). About 8 M parameters; the
+shipped file stores them as float16 (cast back to float32 on load).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+from torchvision.models import resnet18
+from torchvision.models.detection import MaskRCNN
+from torchvision.models.detection.anchor_utils import AnchorGenerator
+from torchvision.models.detection.backbone_utils import BackboneWithFPN
+from torchvision.models.detection.faster_rcnn import FastRCNNPredictor, TwoMLPHead
+from torchvision.models.detection.mask_rcnn import MaskRCNNHeads, MaskRCNNPredictor
+from torchvision.models.detection.rpn import RPNHead
+from torchvision.models.resnet import BasicBlock
+from torchvision.ops import MultiScaleRoIAlign
+from torchvision.ops.feature_pyramid_network import LastLevelMaxPool
+
+from wtcli.errors import ModelError
+from wtcli.masks import LABELS
+
+ARCH = "wtseg-r18s-fpn128"
+NUM_CLASSES = len(LABELS) + 1  # + background; class ids 1..3 follow wtcli.masks.LABELS
+MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
+DEFAULT_WEIGHTS = "wtseg-r18s.pt"
+
+# Image size the network works at (GeneralizedRCNNTransform resizes inside the model):
+# shorter side INFER_MIN_SIZE, longer side at most INFER_MAX_SIZE.
+INFER_MIN_SIZE = 480
+INFER_MAX_SIZE = 640
+TRAIN_MIN_SIZES = (320, 352, 384, 416)
+TRAIN_MAX_SIZE = 555
+FPN_CHANNELS = 128
+
+
+def _trunk() -> nn.Module:
+    r = resnet18(weights=None)  # plain BatchNorm2d, random init: nothing downloaded
+    r.inplanes = 256
+    r.layer4 = r._make_layer(BasicBlock, 256, 2, stride=2)  # slim last stage (8.4 M -> 2.4 M)
+    r.fc = nn.Identity()
+    return r
+
+
+def build_model(detections_per_img: int = 20) -> MaskRCNN:
+    """The network with random weights (no download). Call ``load_weights`` to make it useful."""
+    trunk = _trunk()
+    backbone = BackboneWithFPN(trunk, {"layer2": "0", "layer3": "1", "layer4": "2"},
+                               [128, 256, 256], FPN_CHANNELS, extra_blocks=LastLevelMaxPool())
+    # Blades are long and thin: tall and wide anchors beside square ones; 9 per location.
+    anchors = AnchorGenerator(sizes=((16, 24, 32), (32, 48, 64), (64, 96, 128), (128, 192, 320)),
+                              aspect_ratios=((0.33, 1.0, 3.0),) * 4)
+    names = ["0", "1", "2"]  # RoIAlign on strides 8/16/32 (the pooled level feeds the RPN only)
+    model = MaskRCNN(
+        backbone, num_classes=None,
+        min_size=INFER_MIN_SIZE, max_size=INFER_MAX_SIZE,
+        rpn_anchor_generator=anchors,
+        rpn_head=RPNHead(FPN_CHANNELS, anchors.num_anchors_per_location()[0]),
+        rpn_pre_nms_top_n_train=600, rpn_post_nms_top_n_train=300,
+        rpn_pre_nms_top_n_test=300, rpn_post_nms_top_n_test=100,
+        rpn_batch_size_per_image=128,
+        box_roi_pool=MultiScaleRoIAlign(names, 7, 2),
+        box_head=TwoMLPHead(FPN_CHANNELS * 7 * 7, 256),
+        box_predictor=FastRCNNPredictor(256, NUM_CLASSES),
+        box_batch_size_per_image=128, box_detections_per_img=detections_per_img,
+        box_score_thresh=0.05,
+        mask_roi_pool=MultiScaleRoIAlign(names, 14, 2),
+        mask_head=MaskRCNNHeads(FPN_CHANNELS, [128, 128], 1),
+        mask_predictor=MaskRCNNPredictor(128, 128, NUM_CLASSES),
+    )
+    return model
+
+
+def set_train_sizes(model: MaskRCNN, min_sizes=TRAIN_MIN_SIZES, max_size: int = TRAIN_MAX_SIZE) -> None:
+    """Multi-scale training: GeneralizedRCNNTransform picks one of ``min_sizes`` per batch."""
+    model.transform.min_size = tuple(int(s) for s in min_sizes)
+    model.transform.max_size = int(max_size)
+
+
+def set_infer_size(model: MaskRCNN, min_size: int = INFER_MIN_SIZE, max_size: int = INFER_MAX_SIZE) -> None:
+    model.transform.min_size = (int(min_size),)
+    model.transform.max_size = int(max_size)
+
+
+def state_dict_fp16(model: nn.Module) -> dict[str, torch.Tensor]:
+    """Float tensors cast to float16 (half the file); BN counters stay integer."""
+    return {k: (v.detach().to(torch.float16) if v.is_floating_point() else v.detach()).cpu()
+            for k, v in model.state_dict().items()}
+
+
+def save_weights(model: nn.Module, path: str | Path, meta: dict[str, Any] | None = None) -> Path:
+    """Write the shipped-weights format: {"arch", "state_dict" (fp16), "meta"}."""
+    from wtcli.jsonio import atomic_write_bytes
+    import io
+
+    buf = io.BytesIO()
+    torch.save({"arch": ARCH, "state_dict": state_dict_fp16(model), "meta": dict(meta or {})}, buf)
+    return atomic_write_bytes(path, buf.getvalue())
+
+
+def resolve_weights(path: str | Path | None = None) -> Path:
+    """``path`` as given, else $WTINSPECT_MODEL, else models/DEFAULT_WEIGHTS next to the package."""
+    import os
+
+    if path is not None:
+        return Path(path)
+    env = os.environ.get("WTINSPECT_MODEL")
+    if env:
+        return Path(env)
+    return MODELS_DIR / DEFAULT_WEIGHTS
+
+
+def load_weights(model: nn.Module, path: str | Path | None = None) -> dict[str, Any]:
+    """Fill ``model`` from a weights file (ours, or a training checkpoint); return its meta.
+
+    Raises ModelError naming the file when it is missing, unreadable, not ours or mismatched."""
+    p = resolve_weights(path)
+    if not p.is_file():
+        raise ModelError(f"{p}: model weights not found (train one with `wtinspect train`, or "
+                         "pass --model PATH / set WTINSPECT_MODEL)")
+    try:
+        blob = torch.load(p, map_location="cpu", weights_only=True)
+    except Exception as e:  # noqa: BLE001 - any failure to unpickle means a bad file
+        raise ModelError(f"{p}: not a readable weights file ({e.__class__.__name__}: "
+                         f"{str(e).splitlines()[0][:120] if str(e) else 'corrupt'})") from None
+    if not isinstance(blob, dict):
+        raise ModelError(f"{p}: expected a dict with 'state_dict', got {type(blob).__name__}")
+    state = blob.get("state_dict", blob.get("model"))
+    arch = blob.get("arch", ARCH)
+    if arch != ARCH:
+        raise ModelError(f"{p}: weights are for architecture {arch!r}, this wtinspect builds {ARCH!r}")
+    if not isinstance(state, dict):
+        raise ModelError(f"{p}: no 'state_dict' in the file")
+    ref = model.state_dict()
+    state = {k: (v.to(ref[k].dtype) if k in ref and v.is_floating_point() else v)
+             for k, v in state.items()}
+    try:
+        model.load_state_dict(state, strict=True)
+    except RuntimeError as e:
+        first = str(e).splitlines()[0:2]
+        raise ModelError(f"{p}: weights do not fit the model ({' '.join(first)[:200]})") from None
+    meta = blob.get("meta", {})
+    return meta if isinstance(meta, dict) else {}
+
+
+def pick_device(device: str | None = None) -> torch.device:
+    """'auto'/None: CUDA when available, else CPU. Anything else goes to torch.device."""
+    if device in (None, "", "auto"):
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    try:
+        dev = torch.device(device)
+    except RuntimeError as e:
+        raise ModelError(f"unknown device {device!r} ({e})") from None
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise ModelError(f"device {device!r} asked for but no CUDA GPU is available")
+    return dev
