@@ -217,10 +217,7 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
     swaps: list[int] = []  # indices of the waypoints that end a battery swap on the ground
 
     def link(p: np.ndarray, q: np.ndarray, comp: str, fast: bool, what: str) -> list[WP]:
-        gmin = float(site.ground_z(np.array([p, q])).min()) + s.min_altitude_m
-        if comp == "launch" or comp == "return":
-            gmin = None
-        vias = connect(site, p, q, pp.leg_required, ground=gmin)
+        vias = connect(site, p, q, pp.leg_required, ground=s.min_altitude_m)
         if vias is None:
             raise PlanError(f"{uav}: no safe straight or detoured path {what} keeping "
                             f"{pp.leg_required:.2f} m from every turbine part")

@@ -128,8 +128,9 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
             [[q + dist * u] for u in dirs] + [[p + dist * u, q + dist * u] for u in dirs]
         cands += [[p + dist * gp, q + dist * gq]]
         cands += [[p + dist * gp, m + dist * u, q + dist * gq] for u in dirs]
-        if ground is not None:
-            cands = [c for c in cands if all(v[2] >= ground for v in c)]
+        if ground is not None:  # height above the local ground (nearest base or launch point)
+            cands = [c for c in cands
+                     if all(v[2] >= site.ground_z(v[None])[0] + ground for v in c)]
         if not cands:
             continue
         # Via points must clear themselves (cheap) before their legs are checked.
@@ -367,8 +368,8 @@ def _join(wps: list[WP], q: np.ndarray, q_fwd: np.ndarray, turbine: Turbine, k: 
             if good.any():
                 wps += [WP(v, None, False, comp) for v in batch[int(np.argmax(good))]]
                 return
-    gmin = float(site.ground_z(np.array([p, q])).min()) + pp.min_altitude
-    vias = connect(site, p, q, pp.leg_required, hints=[_unit(p - hc - sp * d)], ground=gmin)
+    vias = connect(site, p, q, pp.leg_required, hints=[_unit(p - hc - sp * d)],
+                   ground=pp.min_altitude)
     if vias is None:
         raise _Blocked(f"no safe way from {np.round(p, 1).tolist()} to {np.round(q, 1).tolist()} "
                        f"around {turbine.id} blade{k + 1}")
@@ -484,8 +485,7 @@ def append_chain(chunk: Chunk, site: Site, pp: PassParams, new: list[WP],
         dropped = False
         if b:
             p = chunk.wps[-1].pos
-            gmin = float(site.ground_z(np.array([p, w.pos])).min()) + pp.min_altitude
-            vias = connect(site, p, w.pos, pp.leg_required, ground=gmin)
+            vias = connect(site, p, w.pos, pp.leg_required, ground=pp.min_altitude)
             if vias is None:
                 if droppable:
                     chunk.notes.append(f"{w.component}: a station no safe path reaches: dropped")
