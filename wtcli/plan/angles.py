@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from wtcli.errors import InputError, PerceptionError
 from wtcli.plan.config import CameraPose, Mission
 from wtcli.plan.zone import azimuths_from_pitch
@@ -68,6 +70,26 @@ def _pitch_results(path: Path, expected: int):
     return [(res, path.name)]
 
 
+# Rotor blades are evenly spaced; a measured gap further than this from 360/N means a merged,
+# split or missed blade (a wrong 3D blade would put the flight where no blade is, and a real
+# blade where the plan thinks there is free air).
+MAX_SPACING_ERROR_DEG = 25.0
+
+
+def check_rotor_spacing(azimuths: list[float], where: str) -> None:
+    n = len(azimuths)
+    if n < 2:
+        return
+    a = np.sort(np.asarray(azimuths, float) % 360.0)
+    gaps = np.diff(np.concatenate([a, [a[0] + 360.0]]))
+    if np.abs(gaps - 360.0 / n).max() > MAX_SPACING_ERROR_DEG:
+        raise PerceptionError(
+            f"{where}: measured blade azimuths {', '.join(f'{x:.1f}' for x in a)} deg are not "
+            f"spread like a {n}-blade rotor (gaps {', '.join(f'{g:.0f}' for g in gaps)}, expected "
+            f"{360.0 / n:.0f} +- {MAX_SPACING_ERROR_DEG:.0f}): a blade was probably merged or "
+            "missed; give a pitch JSON or blade_azimuths_deg in the YAML instead")
+
+
 def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None = None
                    ) -> tuple[dict[str, list[float]], dict[str, str]]:
     """Rotor azimuths per turbine from the given inputs and the turbines' ``photo`` keys.
@@ -97,6 +119,7 @@ def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None 
                 azimuths[owner] = azimuths_from_pitch(t, res, mission.camera, p)
             except ValueError as e:
                 raise InputError(f"{path}: {e}") from None
+            check_rotor_spacing(azimuths[owner], f"{path}: turbine {owner}")
             sources[owner] = f"{path} (back-projected from "
             sources[owner] += "the given camera pose)" if p else "S_p looking at the rotor centre)"
     return azimuths, sources
