@@ -4,6 +4,7 @@ Unknown keys get a "did you mean" hint. ``yaml.safe_load`` only."""
 
 from __future__ import annotations
 
+import copy
 import difflib
 import math
 from pathlib import Path
@@ -31,6 +32,17 @@ def load_yaml(path: str | Path) -> Any:
         at = f" (line {mark.line + 1}, column {mark.column + 1})" if mark else ""
         problem = getattr(e, "problem", None) or str(e).splitlines()[0]
         raise ConfigError(f"{path}: not valid YAML{at}: {problem}") from None
+
+
+def merge(base: dict, over: dict) -> dict:
+    """Deep-merge a user's mapping over packaged defaults (neither input is changed)."""
+    out = copy.deepcopy(base)
+    for k, v in over.items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = merge(out[k], v)
+        else:
+            out[k] = v
+    return out
 
 
 def hint(word: str, choices: Iterable[str]) -> str:

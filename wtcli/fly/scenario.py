@@ -8,7 +8,6 @@ into a ``Scenario``. Documented for users in ``docs/scenarios.md``.
 
 from __future__ import annotations
 
-import copy
 import math
 from dataclasses import asdict, dataclass, replace
 from importlib import resources
@@ -16,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from wtcli.errors import ConfigError
-from wtcli.yamlcheck import check_keys, choice, load_yaml, need_mapping, number, string
+from wtcli.yamlcheck import merge, check_keys, choice, load_yaml, need_mapping, number, string
 
 SCENARIO_DIR = Path(str(resources.files("wtcli") / "data" / "scenarios"))
 DEFAULTS_PATH = SCENARIO_DIR / "defaults.yaml"
@@ -186,14 +185,7 @@ _BOOL = {"gains": ("feed_forward",), "baselines": ("no_compensation", "fixed_pat
 _INTENSITY = ("auto", "light", "moderate", "severe")
 
 
-def _merge(base: dict, over: dict) -> dict:
-    out = copy.deepcopy(base)
-    for k, v in over.items():
-        if isinstance(v, dict) and isinstance(out.get(k), dict):
-            out[k] = _merge(out[k], v)
-        else:
-            out[k] = v
-    return out
+_merge = merge  # the one deep merge lives in wtcli.yamlcheck
 
 
 def _defaults() -> dict:

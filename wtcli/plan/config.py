@@ -8,7 +8,6 @@ then the result is frozen. A ``Mission`` can also be built in code, or from a di
 
 from __future__ import annotations
 
-import copy
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -20,7 +19,7 @@ import yaml
 from wtcli.errors import ConfigError
 from wtcli.geometry import Camera, Turbine
 from wtcli.plan.geodesy import geodetic_to_enu
-from wtcli.yamlcheck import (check_keys, load_yaml, need_mapping, number, string,
+from wtcli.yamlcheck import (merge, check_keys, load_yaml, need_mapping, number, string,
                              vector)
 
 DEFAULTS_PATH = Path(__file__).resolve().parents[1] / "data" / "turbines-defaults.yaml"
@@ -169,14 +168,7 @@ def default_dict() -> dict:
     return yaml.safe_load(DEFAULTS_PATH.read_text(encoding="utf-8"))
 
 
-def _merge(base: dict, over: dict) -> dict:
-    out = copy.deepcopy(base)
-    for k, v in over.items():
-        if isinstance(v, dict) and isinstance(out.get(k), dict):
-            out[k] = _merge(out[k], v)
-        else:
-            out[k] = v
-    return out
+_merge = merge  # the one deep merge lives in wtcli.yamlcheck
 
 
 def load_mission(path: str | Path) -> Mission:

@@ -324,15 +324,9 @@ def check_routes(routes: list[Route], site: Site, launch: np.ndarray, safe: floa
 
 def predict_coverage(t: Turbine, routes: list[Route], camera: Camera, gsd_mm: float,
                      spacing: float, max_incidence: float):
-    pos, rot = [], []
-    prefix = f"{t.id}/"
-    for r in routes:
-        sel = np.nonzero(r.photo & np.array([str(c).startswith(prefix) for c in r.component]))[0]
-        for i in sel:
-            pos.append(r.pos[i])
-            rot.append(_rotation(round(float(r.yaw_deg[i]), 6), round(float(r.gimbal_pitch_deg[i]), 6)))
+    pos, rot = _photos_of(t, routes)
     samples = t.surface_samples(spacing)
-    return measure_coverage(samples, camera, np.array(pos).reshape(-1, 3),
+    return measure_coverage(samples, camera, pos,
                             np.array(rot).reshape(-1, 3, 3), gsd_mm, max_incidence)
 
 
