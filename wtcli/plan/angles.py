@@ -110,6 +110,11 @@ def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None 
         expected = mission.turbine(tid).n_blades if tid else mission.turbines[0].n_blades
         for res, image_name in _pitch_results(path, expected):
             owner = _owner(mission, tid, path, image_name)
+            if owner in azimuths:
+                # Two photos of one rotor could disagree; silently keeping the last one hides that.
+                raise InputError(f"{path}: turbine {owner} gets blade angles from more than one image "
+                                 f"({sources[owner].split(' (')[0]} and {image_name}); give one photo "
+                                 "or one pitch result per turbine")
             t = mission.turbine(owner)
             if len(res.blades) != t.n_blades:
                 raise PerceptionError(f"{path}: found {len(res.blades)} blade(s), turbine {owner} "
