@@ -101,12 +101,6 @@ def test_azimuths_from_pitch_result_of_rendered_masks():
     got = sorted(azimuths_from_pitch(t, res, CAM))
     for g, w in zip(got, sorted(t.azimuths_deg)):
         assert abs((g - w + 180) % 360 - 180) < 2.0
-    # A pitch file with two images for one turbine is ambiguous: refused, not "last one wins".
-    two = tmp_path / "two.json"
-    img = {**res.to_dict(), "error": None}
-    write_json(two, document(PITCH_SCHEMA, PITCH_VERSION, {"images": [img, img]}))
-    r = cli("plan", SAMPLE, f"T2={two}", "--out", tmp_path / "p2.json")
-    assert r.exit_code == 3 and "more than one image" in r.output
 
 
 def test_yaw_pitch_is_what_the_camera_uses():
@@ -345,6 +339,12 @@ def test_cli_pitch_json_input_sets_azimuths(cli, tmp_path):
     got = sorted(read_plan(out).turbine("T2").azimuths_deg)
     for g, w in zip(got, sorted(t.azimuths_deg)):
         assert abs((g - w + 180) % 360 - 180) < 2.0
+    # A pitch file with two images for one turbine is ambiguous: refused, not "last one wins".
+    two = tmp_path / "two.json"
+    img = {**res.to_dict(), "error": None}
+    write_json(two, document(PITCH_SCHEMA, PITCH_VERSION, {"images": [img, img]}))
+    r = cli("plan", SAMPLE, f"T2={two}", "--out", tmp_path / "p2.json")
+    assert r.exit_code == 3 and "more than one image" in r.output
 
 
 def test_cli_bad_inputs_exit_codes(cli, tmp_path):
