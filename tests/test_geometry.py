@@ -147,3 +147,14 @@ def test_coverage_counts_only_the_side_facing_the_camera():
     # Twice the distance: too coarse, nothing counts.
     far = measure_coverage(s, cam, pos + np.array([0, d, 0]), R, target_gsd_mm=1.0)
     assert far.covered.sum() == 0
+
+
+def test_capped_clearance_is_exact_below_the_cap_and_a_lower_bound_above():
+    rng = np.random.default_rng(5)
+    t = make_turbine(az=rng.uniform(0, 360), yaw=rng.uniform(0, 360))
+    P = t.hub_center + rng.normal(size=(3000, 3)) * 40
+    full, capped = t.clearance(P), t.clearance(P, cap=8.0)
+    below = capped < 8.0
+    assert below.any() and (~below).any()
+    assert np.allclose(capped[below], full[below])
+    assert (capped[~below] <= full[~below] + 1e-9).all()

@@ -206,17 +206,52 @@ class Turbine:
     def part_names(self) -> list[str]:
         return [f"blade{k + 1}" for k in range(self.n_blades)] + ["tower", "nacelle", "hub"]
 
-    def clearance_by_part(self, points: np.ndarray) -> np.ndarray:
+    def clearance_by_part(self, points: np.ndarray, cap: float | None = None) -> np.ndarray:
         """Distance (m, >= 0, 0 inside) from each point to each part: shape (M, n_parts), columns
-        in ``part_names()`` order. Never more than the true distance (conservative)."""
+        in ``part_names()`` order. Never more than the true distance (conservative).
+
+        With ``cap``, blade and tower distances are computed exactly only where a cheap bound
+        (distance to an enclosing capsule / cylinder, itself a lower bound) is below ``cap``;
+        elsewhere that bound stands in. Values below ``cap`` are then the same as without it."""
         P = np.atleast_2d(np.asarray(points, dtype=float))
-        cols = [self._blade_distance(P, k) for k in range(self.n_blades)]
-        cols += [self._tower_distance(P), self._nacelle_distance(P), self._hub_distance(P)]
+        cols = [self._capped(P, self._blade_bound(P, k), cap, lambda Q, k=k: self._blade_distance(Q, k))
+                for k in range(self.n_blades)]
+        cols += [self._capped(P, self._tower_bound(P), cap, self._tower_distance),
+                 self._nacelle_distance(P), self._hub_distance(P)]
         return np.stack(cols, axis=1)
 
-    def clearance(self, points: np.ndarray) -> np.ndarray:
+    def clearance(self, points: np.ndarray, cap: float | None = None) -> np.ndarray:
         """Distance (m) from each point to the nearest part of the turbine; (M,) for (M, 3)."""
-        return self.clearance_by_part(points).min(axis=1)
+        return self.clearance_by_part(points, cap).min(axis=1)
+
+    @staticmethod
+    def _capped(P: np.ndarray, bound: np.ndarray | None, cap: float | None, exact) -> np.ndarray:
+        if cap is None or bound is None:
+            return exact(P)
+        out = bound.copy()
+        near = bound < cap
+        if near.any():
+            out[near] = exact(P[near])
+        return out
+
+    def _blade_bound(self, P: np.ndarray, k: int) -> np.ndarray:
+        # Each section lies inside the circle of its chord semi-axis A(f), and the ellipse
+        # distance is at least (radius - A): with the taper factor, never above _blade_distance.
+        d = self.blade_direction(k)
+        q = P - self.hub_center
+        s = q @ d
+        s0, s1 = self.blade_root_offset, self.tip_radius
+        rho = np.linalg.norm(q - s[:, None] * d, axis=1)
+        A, _ = self.blade_semi_axes((np.clip(s, s0, s1) - s0) / (s1 - s0))
+        beyond = np.maximum(s - s1, 0.0) + np.maximum(s0 - s, 0.0)
+        return np.hypot(np.maximum(rho - A, 0.0) * self._blade_taper_cos(), beyond)
+
+    def _tower_bound(self, P: np.ndarray) -> np.ndarray:
+        # The frustum lies inside the cylinder of its base radius.
+        q = P - self.base_xyz
+        rho = np.hypot(q[:, 0], q[:, 1])
+        dz = np.maximum(np.maximum(-q[:, 2], q[:, 2] - self.tower_height), 0.0)
+        return np.hypot(np.maximum(rho - self.tower_base_radius, 0.0), dz)
 
     def segment_clearance(self, p0: np.ndarray, p1: np.ndarray, step: float = 0.5) -> np.ndarray:
         """A lower bound of the clearance along each straight segment p0[i] -> p1[i].
@@ -224,17 +259,7 @@ class Turbine:
         Samples every ``step`` metres at most; between samples the distance function (1-Lipschitz)
         can dip by at most half the sample spacing, which is subtracted.
         """
-        p0 = np.atleast_2d(np.asarray(p0, dtype=float))
-        p1 = np.atleast_2d(np.asarray(p1, dtype=float))
-        length = np.linalg.norm(p1 - p0, axis=1)
-        n = np.maximum(1, np.ceil(length / step).astype(int))
-        seg = np.repeat(np.arange(len(p0)), n + 1)
-        t = np.concatenate([np.linspace(0.0, 1.0, k + 1) for k in n])
-        pts = p0[seg] + (p1 - p0)[seg] * t[:, None]
-        c = self.clearance(pts)
-        out = np.full(len(p0), np.inf)
-        np.minimum.at(out, seg, c)
-        return out - 0.5 * length / n
+        return segment_lower_bound(self.clearance, p0, p1, step)
 
     def _hub_distance(self, P: np.ndarray) -> np.ndarray:
         return np.maximum(np.linalg.norm(P - self.hub_center, axis=1) - self.hub_radius, 0.0)
@@ -487,6 +512,24 @@ class Mesh:
         nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         length = np.linalg.norm(nrm, axis=1, keepdims=True)
         return nrm / np.where(length > 0, length, 1.0)
+
+
+def segment_lower_bound(clearance, p0: np.ndarray, p1: np.ndarray, step: float = 0.5) -> np.ndarray:
+    """A lower bound of ``clearance`` (any 1-Lipschitz distance function of points) along each
+    straight segment p0[i] -> p1[i]: samples at most ``step`` apart, minus half the spacing."""
+    p0 = np.atleast_2d(np.asarray(p0, dtype=float))
+    p1 = np.atleast_2d(np.asarray(p1, dtype=float))
+    if len(p0) == 0:
+        return np.zeros(0)
+    length = np.linalg.norm(p1 - p0, axis=1)
+    n = np.maximum(1, np.ceil(length / step).astype(int))
+    seg = np.repeat(np.arange(len(p0)), n + 1)
+    start = np.repeat(np.concatenate([[0], np.cumsum(n + 1)[:-1]]), n + 1)
+    t = (np.arange(len(seg)) - start) / np.repeat(n, n + 1)
+    pts = p0[seg] + (p1 - p0)[seg] * t[:, None]
+    out = np.full(len(p0), np.inf)
+    np.minimum.at(out, seg, clearance(pts))
+    return out - 0.5 * length / n
 
 
 def _ellipse_distance(u: np.ndarray, v: np.ndarray, A: np.ndarray, B: np.ndarray) -> np.ndarray:

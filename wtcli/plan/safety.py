@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from wtcli.geometry import Turbine
+from wtcli.geometry.turbine import segment_lower_bound
 
 HORIZON_M = 60.0
 
@@ -54,40 +55,7 @@ class Site:
         return out
 
     def _turbine_clearance(self, t: Turbine, P: np.ndarray, cap: float) -> np.ndarray:
-        out = np.full(len(P), np.inf)
-        # Blades: each section lies inside the circle of its chord semi-axis A(f); with the
-        # model's taper factor, (radius - A(f)) * taper_cos is a lower bound of the distance that
-        # is never above Turbine.clearance (the ellipse distance is at least radius - A).
-        s0, s1 = t.blade_root_offset, t.tip_radius
-        hc = t.hub_center
-        tc = t._blade_taper_cos()
-        q = P - hc
-        for k in range(t.n_blades):
-            d = t.blade_direction(k)
-            s = q @ d
-            sc = np.clip(s, s0, s1)
-            rho = np.linalg.norm(q - s[:, None] * d, axis=1)
-            A, _ = t.blade_semi_axes((sc - s0) / (s1 - s0))
-            beyond = np.maximum(s - s1, 0.0) + np.maximum(s0 - s, 0.0)
-            bound = np.hypot(np.maximum(rho - A, 0.0) * tc, beyond)
-            exact = bound < cap
-            val = bound
-            if exact.any():
-                val = bound.copy()
-                val[exact] = t._blade_distance(P[exact], k)
-            out = np.minimum(out, val)
-        # Tower: inside the cylinder of its base radius; nacelle and hub are cheap.
-        q = P - t.base_xyz
-        rho = np.hypot(q[:, 0], q[:, 1])
-        dz = np.maximum(np.maximum(-q[:, 2], q[:, 2] - t.tower_height), 0.0)
-        bound = np.hypot(np.maximum(rho - t.tower_base_radius, 0.0), dz)
-        exact = bound < cap
-        val = bound.copy()
-        if exact.any():
-            val[exact] = t._tower_distance(P[exact])
-        out = np.minimum(out, val)
-        out = np.minimum(out, t._nacelle_distance(P))
-        return np.minimum(out, t._hub_distance(P))
+        return t.clearance(P, cap=cap)
 
     def nearest_part(self, point: np.ndarray) -> tuple[str, float]:
         """("T1 blade2", 2.3): the part of any turbine nearest a point, and its distance."""
@@ -102,21 +70,7 @@ class Site:
     def segment_clearance(self, p0: np.ndarray, p1: np.ndarray, step: float = 0.5,
                           cap: float | None = None) -> np.ndarray:
         """Lower bound of the clearance along each straight leg p0[i] -> p1[i] (capped)."""
-        p0 = np.atleast_2d(np.asarray(p0, float))
-        p1 = np.atleast_2d(np.asarray(p1, float))
-        if len(p0) == 0:
-            return np.zeros(0)
-        length = np.linalg.norm(p1 - p0, axis=1)
-        n = np.maximum(1, np.ceil(length / step).astype(int))
-        seg = np.repeat(np.arange(len(p0)), n + 1)
-        start = np.concatenate([[0], np.cumsum(n + 1)[:-1]])
-        k = np.arange(len(seg)) - np.repeat(start, n + 1)
-        t = k / np.repeat(n, n + 1)
-        pts = p0[seg] + (p1 - p0)[seg] * t[:, None]
-        c = self.clearance(pts, cap)
-        out = np.full(len(p0), np.inf)
-        np.minimum.at(out, seg, c)
-        return out - 0.5 * length / n
+        return segment_lower_bound(lambda pts: self.clearance(pts, cap), p0, p1, step)
 
     def ground_z(self, points: np.ndarray) -> np.ndarray:
         """Ground level under each point: the height of the nearest turbine base or launch point
