@@ -90,12 +90,43 @@ def check_rotor_spacing(azimuths: list[float], where: str) -> None:
             "missed; give a pitch JSON or blade_azimuths_deg in the YAML instead")
 
 
+# Several photos of one (locked) rotor should agree to within the pitch error; more than this
+# means the rotor turned between them or one photo was segmented wrongly.
+MAX_PHOTO_DISAGREEMENT_DEG = 10.0
+
+
+def combine_azimuths(sets: list[list[float]], names: list[str], where: str) -> list[float]:
+    """One rotor's blade azimuths from several images: each image's blades matched to the first
+    image's by nearest angle, then averaged on the circle. Images that disagree by more than
+    MAX_PHOTO_DISAGREEMENT_DEG on any blade are refused (PerceptionError) naming both."""
+    ref = np.asarray(sets[0], float)
+    stacks = [ref]
+    for az, name in zip(sets[1:], names[1:]):
+        az = np.asarray(az, float)
+        d = (az[None, :] - ref[:, None] + 180.0) % 360.0 - 180.0  # [ref blade, this blade]
+        order = np.argmin(np.abs(d), axis=1)
+        if len(set(order.tolist())) != len(ref):
+            order = np.arange(len(ref))  # ambiguous match: the spread check below says so
+        off = d[np.arange(len(ref)), order]
+        worst = int(np.argmax(np.abs(off)))
+        if abs(off[worst]) > MAX_PHOTO_DISAGREEMENT_DEG:
+            raise PerceptionError(
+                f"{where}: {names[0]} and {name} disagree by {abs(off[worst]):.1f} deg on a blade "
+                f"(limit {MAX_PHOTO_DISAGREEMENT_DEG:.0f}): did the rotor turn between the photos? "
+                "give only the photos of the rotor as it stands now")
+        stacks.append(ref + off)
+    mean = np.mean(stacks, axis=0)  # offsets are unwrapped around ref, so a plain mean is circular
+    return [float(a % 360.0) for a in mean]
+
+
 def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None = None
                    ) -> tuple[dict[str, list[float]], dict[str, str]]:
     """Rotor azimuths per turbine from the given inputs and the turbines' ``photo`` keys.
 
-    Returns (azimuths, where each came from). Turbines without any photo keep their YAML angles
-    (not in the result)."""
+    Several images of one turbine (several photos, or a pitch file with several images) are
+    combined: each is back-projected on its own, checked, and the blade angles averaged
+    (``combine_azimuths``). Returns (azimuths, where they came from). Turbines without any photo
+    keep their YAML angles (not in the result)."""
     ids = {t.id for t in mission.turbines}
     todo: list[tuple[str | None, Path]] = [_parse(a, ids) for a in inputs]
     named = {tid for tid, _ in todo if tid}
@@ -104,27 +135,31 @@ def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None 
             photo = mission.extra(t.id).photo
             if photo is not None and t.id not in named:
                 todo.append((t.id, photo))
-    azimuths: dict[str, list[float]] = {}
-    sources: dict[str, str] = {}
+    per: dict[str, list[tuple[list[float], str]]] = {}
+    how: dict[str, str] = {}
     for tid, path in todo:
         expected = mission.turbine(tid).n_blades if tid else mission.turbines[0].n_blades
         for res, image_name in _pitch_results(path, expected):
             owner = _owner(mission, tid, path, image_name)
-            if owner in azimuths:
-                # Two photos of one rotor could disagree; silently keeping the last one hides that.
-                raise InputError(f"{path}: turbine {owner} gets blade angles from more than one image "
-                                 f"({sources[owner].split(' (')[0]} and {image_name}); give one photo "
-                                 "or one pitch result per turbine")
             t = mission.turbine(owner)
+            name = f"{path}" if not image_name or Path(str(image_name)).name == path.name \
+                else f"{path}:{image_name}"
             if len(res.blades) != t.n_blades:
-                raise PerceptionError(f"{path}: found {len(res.blades)} blade(s), turbine {owner} "
+                raise PerceptionError(f"{name}: found {len(res.blades)} blade(s), turbine {owner} "
                                       f"has {t.n_blades}")
             p = pose or mission.extra(owner).camera_pose
             try:
-                azimuths[owner] = azimuths_from_pitch(t, res, mission.camera, p)
+                az = azimuths_from_pitch(t, res, mission.camera, p)
             except ValueError as e:
-                raise InputError(f"{path}: {e}") from None
-            check_rotor_spacing(azimuths[owner], f"{path}: turbine {owner}")
-            sources[owner] = f"{path} (back-projected from "
-            sources[owner] += "the given camera pose)" if p else "S_p looking at the rotor centre)"
+                raise InputError(f"{name}: {e}") from None
+            check_rotor_spacing(az, f"{name}: turbine {owner}")
+            per.setdefault(owner, []).append((az, name))
+            how[owner] = "the given camera pose" if p else "S_p looking at the rotor centre"
+    azimuths: dict[str, list[float]] = {}
+    sources: dict[str, str] = {}
+    for owner, found in per.items():
+        names = [n for _, n in found]
+        azimuths[owner] = combine_azimuths([a for a, _ in found], names, f"turbine {owner}")
+        what = names[0] if len(names) == 1 else f"{len(names)} images ({', '.join(names)}), averaged"
+        sources[owner] = f"{what} (back-projected from {how[owner]})"
     return azimuths, sources
