@@ -95,6 +95,32 @@ def test_surface_samples_labels():
     assert 100 < area < 1000  # a 45 m blade has a few hundred m^2 of surface
 
 
+def test_blade_root_inside_the_nacelle_is_not_surface():
+    """The nacelle's front face sits less than a root semi-chord behind the rotor plane, so the
+    root's trailing edge runs into the nacelle box: those points are inside the turbine, not on
+    its outer surface, and are not sampled. Everywhere else the blade is sampled as before."""
+    t = make_turbine(az=30, yaw=20)
+    front = t.overhang - 0.6 * t.nacelle_length  # hub centre -> nacelle front face, along the axis
+    assert 0 < front < t.blade_root_chord / 2  # the premise: the root crosses the front face
+    k = 0
+    d, c, _ = t.blade_frame(k)
+    te_root = t.hub_center + t.hub_radius * d - (t.blade_root_chord / 2) * c  # outside the hub
+    assert t.clearance_by_part(te_root)[0, t.part_names().index("nacelle")] == 0  # inside
+    s = t.surface_samples(0.25, parts="blades")
+    others = t.clearance_by_part(s.points)
+    own = others[np.arange(len(s)), s.blade]
+    others[np.arange(len(s)), s.blade] = np.inf
+    assert (others.min(axis=1) > 0).all()  # no sample inside another part
+    assert (own < 1e-6).all()  # and every one on its own blade
+    # Only the root loses samples: the trailing edge just beyond the nacelle is still there,
+    # and against the same blade on a longer overhang (no contact) only a few % of area is gone.
+    te_idx = (s.blade == k) & (s.side == BLADE_SIDES.index("trailing_edge"))
+    assert 0 < others[te_idx].min() < 0.3
+    free = make_turbine(az=30, yaw=20, overhang=10.0).surface_samples(0.25, parts="blades")
+    free_area = free.area[(free.blade == k) & (free.side == BLADE_SIDES.index("trailing_edge"))].sum()
+    assert 0.93 * free_area < s.area[te_idx].sum() < 0.99 * free_area
+
+
 def test_camera_projection_roundtrip_and_gsd():
     cam = Camera(5456, 3632, 16, 23.2).looking_at(np.array([0, -10, 50.0]), np.array([0, 0, 50.0]))
     assert cam.gsd_mm(10) == pytest.approx(2.657, abs=1e-3)  # formats.md example

@@ -347,12 +347,18 @@ class Turbine:
         dl = np.hypot(a_ * np.sin(PSI), b_ * np.cos(PSI)) * (2 * math.pi / m)
         area = dl * (s1 - s_start) / ns
         size = ns * m
-        return {
+        out = {
             "points": pts.reshape(size, 3), "normals": nrm.reshape(size, 3),
             "area": area.reshape(size), "part": np.full(size, k, np.int16),
             "blade": np.full(size, k, np.int16), "side": side.reshape(size),
             "span": np.repeat(f, m),
         }
+        # Where the root runs into another part (its trailing edge into the nacelle's front face,
+        # which sits less than a root semi-chord behind the rotor plane), that stretch is inside
+        # the turbine, not on its outer surface: no camera can see it, so it is not sampled.
+        others = [j for j in range(len(self.part_names())) if j != k]
+        buried = self.clearance_by_part(out["points"], cap=1e-6)[:, others].min(axis=1) <= 0.0
+        return {key: v[~buried] for key, v in out.items()}
 
     def _tower_samples(self, spacing: float) -> dict[str, np.ndarray]:
         H, rb, rt = self.tower_height, self.tower_base_radius, self.tower_top_radius

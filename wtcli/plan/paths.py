@@ -283,7 +283,8 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
             if attempt:
                 chunk.notes.append(f"{comp}: {attempt} first station(s) unreachable from the "
                                    "previous pass: dropped")
-        append_chain(chunk, site, pp, [WP(p, f, True, comp) for p, f in zip(pos, fwd)])
+        append_chain(chunk, site, pp, [WP(p, f, True, comp) for p, f in zip(pos, fwd)],
+                     blade=(turbine, k))
     wps = chunk.wps
     if not wps:
         chunk.notes.append(f"{label}: no safe station at all")
@@ -300,12 +301,12 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
 
 
 def _arc(turbine: Turbine, frame: tuple, s: float, g_from: float, g_to: float, radius: float,
-         long_way: bool = False) -> list[np.ndarray]:
+         long_way: bool = False, step_deg: float = 30.0) -> list[np.ndarray]:
     d, c, n = frame
     dg = (g_to - g_from + math.pi) % (2 * math.pi) - math.pi
     if long_way:
         dg -= math.copysign(2 * math.pi, dg)
-    m = max(1, int(math.ceil(abs(dg) / math.radians(30))))
+    m = max(1, int(math.ceil(abs(dg) / math.radians(step_deg))))
     out = []
     for j in range(1, m):
         g = g_from + dg * j / m
@@ -331,12 +332,12 @@ def _join(wps: list[WP], q: np.ndarray, q_fwd: np.ndarray, turbine: Turbine, k: 
     A, _ = turbine.blade_semi_axes(np.array([1.0]))
     s_end = turbine.tip_radius
     s_arc = max(sp, sq) if abs(sp - sq) < 3 else None
+    cands = []
     if s_arc is not None:
         radius = max(rp, rq)
         spans = [s_arc] + [x for x in np.arange(s_arc + 2.0, s_end + 0.1, 2.0)]
         if s_arc > s_end - 2.0:  # at the tip: go round beyond it too
             spans += [s_end + pp.required]
-        cands = []
         for long_way in (False, True):
             for s in spans:
                 vias = []
@@ -346,6 +347,27 @@ def _join(wps: list[WP], q: np.ndarray, q_fwd: np.ndarray, turbine: Turbine, k: 
                 if abs(s - sq) > 1e-6:
                     vias.append(hc + s * d + (q - hc - sq * d))
                 cands.append(vias)
+    elif site.segment_clearance(p[None], q[None], LEG_STEP, pp.required)[0] >= pp.leg_required:
+        return
+    else:
+        # Along the span (a pass whose middle stations were dropped, e.g. a trailing edge facing
+        # the tower): round the blade at p's span to a free angle, along the blade there, and
+        # back round at q's span; nearest angles first.
+        lo, hi = sorted((sp, sq))
+        A_max = float(turbine.blade_semi_axes(
+            (np.clip(np.linspace(lo, hi, 16), turbine.blade_root_offset, s_end)
+             - turbine.blade_root_offset) / (s_end - turbine.blade_root_offset))[0].max())
+        radius = max(rp, rq, A_max + pp.standoff)
+        g_mid = gp + 0.5 * ((gq - gp + math.pi) % (2 * math.pi) - math.pi)
+        for dg in (30, -30, 60, -60, 90, -90, 120, -120, 150, -150, 180):
+            g = g_mid + math.radians(dg)
+            for r in (radius, radius + 2.0):
+                w = math.cos(g) * c + math.sin(g) * n
+                # Fine arc steps: p and q may keep barely the clearance, a chord would cut in.
+                cands.append(_arc(turbine, (d, c, n), sp, gp, g, rp, step_deg=10.0)
+                             + [hc + sp * d + r * w, hc + sq * d + r * w]
+                             + _arc(turbine, (d, c, n), sq, g, gq, rq, step_deg=10.0))
+    if cands:
         # Candidates checked a few at a time; the first (nearest the passes' end) that clears wins.
         for b0 in range(0, len(cands), 6):
             batch = cands[b0:b0 + 6]
@@ -466,9 +488,10 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
 
 
 def append_chain(chunk: Chunk, site: Site, pp: PassParams, new: list[WP],
-                 droppable: bool = False) -> None:
-    """Append waypoints in order; legs that do not keep the clearance get via points. A station
-    no safe detour reaches is an error, or with ``droppable`` (tower, nacelle) left out."""
+                 droppable: bool = False, blade: tuple[Turbine, int] | None = None) -> None:
+    """Append waypoints in order; legs that do not keep the clearance get via points (with
+    ``blade`` = (turbine, index), first a way round that blade, ``_join``). A station no safe
+    detour reaches is an error, or with ``droppable`` (tower, nacelle) left out."""
     if not new:
         return
     pts = np.array(([chunk.wps[-1].pos] if chunk.wps else []) + [w.pos for w in new])
@@ -485,7 +508,16 @@ def append_chain(chunk: Chunk, site: Site, pp: PassParams, new: list[WP],
         dropped = False
         if b:
             p = chunk.wps[-1].pos
-            vias = connect(site, p, w.pos, pp.leg_required, ground=pp.min_altitude)
+            if blade is not None:
+                n0 = len(chunk.wps)
+                try:  # round the blade first; _join falls back on connect itself
+                    _join(chunk.wps, w.pos, w.fwd, blade[0], blade[1], site, pp, w.component)
+                    vias = [v.pos for v in chunk.wps[n0:]]
+                    del chunk.wps[n0:]
+                except _Blocked:
+                    vias = None
+            else:
+                vias = connect(site, p, w.pos, pp.leg_required, ground=pp.min_altitude)
             if vias is None:
                 if droppable:
                     chunk.notes.append(f"{w.component}: a station no safe path reaches: dropped")
@@ -494,3 +526,172 @@ def append_chain(chunk: Chunk, site: Site, pp: PassParams, new: list[WP],
                 raise _Blocked(f"no safe way between two {w.component} stations")
             chunk.wps += [WP(v, None, False, w.component) for v in vias]
         chunk.wps.append(w)
+
+
+# ---- gap filling -------------------------------------------------------------------------------------
+GAP_MAX_VIEWS = 12  # per blade: a handful of extra photos, never a second survey
+GAP_CANDIDATES = 12000  # candidate viewpoints per blade at most (seeds x directions x distances)
+# Candidate grids, finest first: (off-normal step, step around the normal (deg), distances).
+GAP_GRIDS = ((3.0, 10.0, 8), (4.0, 15.0, 6), (6.0, 20.0, 6))
+GAP_BORDER = 0.05  # frame margin the candidates keep (coverage itself uses 0.02)
+
+
+def gap_views(turbine: Turbine, k: int, pts: np.ndarray, nrm: np.ndarray, area: np.ndarray,
+              site: Site, pp: PassParams, max_incidence_deg: float,
+              max_distance: float) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Extra photo stations for blade k's surface samples (pts, nrm, area) that the passes miss.
+
+    Where the passes cannot go (the root's trailing edge faces the hub and nacelle; a blade
+    pointing down has its trailing edge facing the tower), a view from further along the span, or
+    from aside, at an angle up to the incidence limit, may still see the sample while keeping
+    the clearance. Candidates: from each of a few missed samples, directions in a cone around its
+    normal, at distances from the smallest standoff to ``max_distance`` (the caller's GSD limit),
+    each aimed at its sample; only those that keep ``pp.required`` from every part and the
+    minimum altitude. Greedy set cover by missed area, with margins (incidence 1 deg inside the
+    limit, frame border 5 %); a view's claim counts only samples whose line of sight no other
+    part blocks. Returns [(position, viewing direction, covered mask)].
+    """
+    if len(pts) == 0:
+        return []
+    lim = max_incidence_deg - 1.0
+    # The views that clear are a thin shell (clearance vs GSD): the fewer samples are missed,
+    # the finer the grid each is searched with, within one budget of candidates.
+    for ring, around, n_dist in GAP_GRIDS:
+        dirs = [(0.0, 0.0)] + [(th, ph) for th in np.arange(ring, lim, ring)
+                                for ph in np.arange(0.0, 360.0, around)]
+        if len(pts) * len(dirs) * n_dist <= GAP_CANDIDATES:
+            break
+    R = np.linspace(pp.min_standoff, max_distance, n_dist)
+    n_seeds = max(1, min(len(pts), GAP_CANDIDATES // (len(dirs) * len(R))))
+    seeds = np.unique(np.linspace(0, len(pts) - 1, n_seeds).round().astype(int))
+    S, N = pts[seeds], nrm[seeds]
+    a = np.cross(N, Z)
+    flat = np.linalg.norm(a, axis=1) < 1e-6
+    a[flat] = np.cross(N[flat], [1.0, 0.0, 0.0])
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    b = np.cross(N, a)
+    th = np.radians([d[0] for d in dirs])[None, :, None]
+    ph = np.radians([d[1] for d in dirs])[None, :, None]
+    U = np.cos(th) * N[:, None] + np.sin(th) * (np.cos(ph) * a[:, None] + np.sin(ph) * b[:, None])
+    C = S[:, None, None, :] + R[None, None, :, None] * U[:, :, None, :]  # (seed, dir, dist, 3)
+    target = np.broadcast_to(S[:, None, None, :], C.shape).reshape(-1, 3)
+    C = C.reshape(-1, 3)
+    ok = C[:, 2] >= site.ground_z(C) + pp.min_altitude
+    ok[ok] = site.clearance(C[ok], pp.required) >= pp.required
+    C, target = C[ok], target[ok]
+    if len(C) == 0:
+        return []
+    F = target - C
+    F /= np.linalg.norm(F, axis=1, keepdims=True)
+    right = np.cross(F, Z)
+    rn = np.linalg.norm(right, axis=1, keepdims=True)
+    keep = rn[:, 0] > 1e-3  # straight up or down: the yaw is ill-defined, leave those out
+    C, F, right, rn = C[keep], F[keep], right[keep], rn[keep]
+    right /= rn
+    down = np.cross(F, right)
+    # Which missed samples each candidate images (the coverage rules, with margins).
+    cam = pp.camera
+    mx, my = GAP_BORDER * cam.width_px, GAP_BORDER * cam.height_px
+    cos_lim = math.cos(math.radians(lim))
+    sees = np.zeros((len(C), len(pts)), bool)
+    for c0 in range(0, len(C), 1024):
+        sl = slice(c0, c0 + 1024)
+        rel = pts[None, :, :] - C[sl, None, :]  # (cand, sample, 3)
+        dist = np.linalg.norm(rel, axis=2)
+        facing = -np.einsum("csj,sj->cs", rel, nrm) / np.maximum(dist, 1e-9)
+        z = np.einsum("csj,cj->cs", rel, F[sl])
+        zs = np.where(z > 0.1, z, 1.0)
+        u = cam.fx * np.einsum("csj,cj->cs", rel, right[sl]) / zs + cam.cx
+        v = cam.fx * np.einsum("csj,cj->cs", rel, down[sl]) / zs + cam.cy
+        sees[sl] = ((dist <= max_distance) & (facing >= cos_lim) & (z > 0.1) & (u >= mx)
+                    & (u <= cam.width_px - 1 - mx) & (v >= my) & (v <= cam.height_px - 1 - my))
+    others = [j for j in range(len(turbine.part_names())) if j != k]
+    left = np.ones(len(pts), bool)
+    views: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    checked = np.zeros(len(C), bool)
+    while len(views) < GAP_MAX_VIEWS and left.any():
+        gain = (sees & left) @ area
+        i = int(np.argmax(gain))
+        if gain[i] <= 1e-9:
+            break
+        if not checked[i]:  # line of sight to each claimed sample, once per candidate (lazy)
+            claim = np.nonzero(sees[i])[0]
+            f = np.linspace(0.0, 1.0, 24)[:-2]
+            line = C[i] + f[None, :, None] * (pts[claim] - C[i])[:, None, :]
+            d = turbine.clearance_by_part(line.reshape(-1, 3), cap=0.05)[:, others]
+            blocked = (d.min(axis=1) < 0.02).reshape(len(claim), -1).any(axis=1)
+            sees[i, claim[blocked]] = False
+            checked[i] = True
+            continue
+        views.append((C[i], F[i], sees[i] & left))
+        left &= ~sees[i]
+    return views
+
+
+def insert_views(chunk: Chunk, views: list[tuple[np.ndarray, np.ndarray, str]], site: Site,
+                 pp: PassParams) -> int:
+    """Insert photo stations into a chunk where they lengthen it least (cheapest insertion between
+    two consecutive waypoints whose legs to the station keep the clearance; else with
+    ``connect`` detours). Returns how many could not be reached safely (left out)."""
+    missed = 0
+    for pos, fwd, comp in views:
+        P = np.array([w.pos for w in chunk.wps])
+        if len(P) < 2:
+            missed += 1
+            continue
+        cost = (np.linalg.norm(P[:-1] - pos, axis=1) + np.linalg.norm(P[1:] - pos, axis=1)
+                - np.linalg.norm(P[1:] - P[:-1], axis=1))
+        order = np.argsort(cost)[:8]
+        lb = site.segment_clearance(np.r_[P[order], np.tile(pos, (len(order), 1))],
+                                    np.r_[np.tile(pos, (len(order), 1)), P[order + 1]],
+                                    LEG_STEP, pp.required)
+        good = (lb[:len(order)] >= pp.leg_required) & (lb[len(order):] >= pp.leg_required)
+        new = WP(pos, fwd, True, comp)
+        if good.any():
+            i = int(order[np.argmax(good)])
+            chunk.wps.insert(i + 1, new)
+            continue
+        i = int(order[0])
+        v1 = connect(site, P[i], pos, pp.leg_required, ground=pp.min_altitude)
+        v2 = connect(site, pos, P[i + 1], pp.leg_required, ground=pp.min_altitude) if v1 is not None else None
+        if v2 is None:
+            missed += 1
+            continue
+        chunk.wps[i + 1:i + 1] = ([WP(v, None, False, comp) for v in v1] + [new]
+                                  + [WP(v, None, False, comp) for v in v2])
+    return missed
+
+
+def gap_plan(turbine: Turbine, samples, covered: np.ndarray, site: Site, pp: PassParams,
+             max_incidence_deg: float, max_distance: float, blades=None
+             ) -> tuple[dict[int, list[tuple[np.ndarray, np.ndarray, str]]], np.ndarray]:
+    """``gap_views`` for each blade (all, or those in ``blades``) over its samples that
+    ``covered`` misses (``samples``: the turbine's blade ``SurfaceSamples``). Returns
+    {blade index: [(position, viewing direction, component)]} and ``covered`` with what the views
+    add (predicted with the margins of ``gap_views``)."""
+    covered = covered.copy()
+    out: dict[int, list[tuple[np.ndarray, np.ndarray, str]]] = {}
+    for k in range(turbine.n_blades):
+        idx = np.nonzero((samples.blade == k) & ~covered)[0]
+        if (blades is not None and k not in blades) or len(idx) == 0:
+            continue
+        views = gap_views(turbine, k, samples.points[idx], samples.normals[idx], samples.area[idx],
+                          site, pp, max_incidence_deg, max_distance)
+        out[k] = []
+        for pos, fwd, got in views:
+            side_area = np.bincount(samples.side[idx][got], samples.area[idx][got], len(BLADE_SIDES))
+            out[k].append((pos, fwd, f"{turbine.id}/blade{k + 1}/{BLADE_SIDES[int(np.argmax(side_area))]}"))
+            covered[idx[got]] = True
+    return out, covered
+
+
+def add_gap_views(chunks: list[Chunk], views: dict[int, list[tuple[np.ndarray, np.ndarray, str]]],
+                  site: Site, pp: PassParams) -> None:
+    """Fly each blade's gap views within that blade's own trajectory (``insert_views``)."""
+    for ch in chunks:
+        if not ch.name.startswith("blade") or not views.get(int(ch.name[5:]) - 1):
+            continue
+        vs = views[int(ch.name[5:]) - 1]
+        lost = insert_views(ch, vs, site, pp)
+        ch.notes.append(f"{ch.turbine}/{ch.name}: {len(vs) - lost} extra view(s) of surface the "
+                        "passes miss" + (f"; {lost} no safe path reaches: dropped" if lost else ""))
