@@ -164,6 +164,7 @@ def test_root_trailing_edge_miss_is_out_of_sight():
     s = t.surface_samples(m.settings.coverage_spacing_m, "blades")
     missed = s[~measure_coverage(s, CAM, pos, rot, gsd, 60.0).covered]
     assert 1 <= len(missed) <= 2
+    assert (missed.span < 0.05).all() and (missed.side == 2).all()  # trailing edge, at the root
     site = Site([t])
     far = CAM.distance_for_gsd(1.05 * gsd)
     for x, nrm in zip(missed.points, missed.normals):
@@ -177,7 +178,27 @@ def test_root_trailing_edge_miss_is_out_of_sight():
         R = np.arange(pp.required, far + 1e-9, 0.05)
         C = (x + R[None, :, None] * U[:, None, :]).reshape(-1, 3)
         assert site.clearance(C, pp.required).max() < pp.required
-        assert (missed.span < 0.05).all()  # at the root
+
+
+@pytest.mark.slow
+def test_worst_side_over_random_single_turbines():
+    """16 random stops, yaws and sizes at the default settings (benchmarks/plan_coverage.py is
+    the longer run): most turbines at 98 % on every side, the worst side 98.5 % on average, and
+    every side at least 95 % (the root samples of a blade at ~240/300 deg that no viewpoint sees
+    at 4 m clearance within the margins: 2.2 % of a 45 m trailing edge each)."""
+    rng = np.random.default_rng(5)
+    worst = []
+    for _ in range(16):
+        D = float(rng.choice([90.0, 120.0, 150.0]))
+        t = make_turbine(az=float(rng.uniform(0, 120)), yaw=float(rng.uniform(0, 360)),
+                         hub_height=D / 2 + float(rng.uniform(15, 45)), rotor_diameter=D)
+        plan = plan_mission(Mission((t,), CAM))
+        assert not any(plan.summary["violations"].values())
+        worst.append(plan.summary["predicted_coverage"]["T1"]["min_side"])
+    worst = np.array(worst)
+    assert worst.min() >= 0.95, worst
+    assert worst.mean() >= 0.985, worst
+    assert (worst >= 0.98).mean() >= 0.75, worst
 
 
 def test_trailing_edge_facing_the_tower_is_flown_round_not_refused():
