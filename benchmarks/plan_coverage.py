@@ -1,6 +1,7 @@
 """Predicted coverage per blade side over random single turbines, and why samples are missed.
 
-    python benchmarks/plan_coverage.py [--cases 20] [--seed 11] [--spacing 1.0] [--why] [--out results.json]
+    python benchmarks/plan_coverage.py [--cases 20] [--seed 11] [--spacing 1.0] [--why]
+                                       [--out results.json]
 
 Random turbines: rotor azimuth 0-120 deg, yaw 0-360 deg, rotor diameter 90/120/150 m, hub height
 R + 15..45 m; default mission settings (safe distance 3 m + 1 m tracking margin, 1.5 mm/px) with
@@ -107,7 +108,8 @@ def run(cases: int, seed: int, why: bool, spacing: float = 1.0) -> dict:
         s = plan.summary
         cov = s["predicted_coverage"]["T1"]
         sides = cov["by_blade_side"]
-        worst_b, worst_s = min(((b, sd) for b in sides for sd in sides[b]), key=lambda x: sides[x[0]][x[1]])
+        worst_b, worst_s = min(((b, sd) for b in sides for sd in sides[b]),
+                               key=lambda x: sides[x[0]][x[1]])
         row = {"case": c, "azimuths_deg": list(t.azimuths_deg), "yaw_deg": t.yaw_deg,
                "rotor_diameter": t.rotor_diameter, "hub_height": t.hub_height,
                "blade_average": cov["blade_average"], "min_side": cov["min_side"],
@@ -131,8 +133,9 @@ def run(cases: int, seed: int, why: bool, spacing: float = 1.0) -> dict:
                 k = int(smp.blade[i])
                 s_m = t.blade_root_offset + smp.span[i] * (t.tip_radius - t.blade_root_offset)
                 az = t.azimuths_deg[k]
-                miss_where[(BLADE_SIDES[smp.side[i]], r, "root<4m" if s_m < 4 else
-                            f"span{int(smp.span[i] * 10) / 10:.1f}", f"az{int(az // 30) * 30}")] += float(smp.area[i])
+                where = "root<4m" if s_m < 4 else f"span{int(smp.span[i] * 10) / 10:.1f}"
+                miss_where[(BLADE_SIDES[smp.side[i]], r, where, f"az{int(az // 30) * 30}")] += \
+                    float(smp.area[i])
             reasons.update(area)
             row["missed_m2"] = dict(area)
             extra = " missed m2 " + ", ".join(f"{k} {v:.2f}" for k, v in sorted(area.items()))

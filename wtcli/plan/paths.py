@@ -12,6 +12,11 @@ for the trailing edge; the hub and nacelle crowd the roots), the blocked station
 oblique passes at +-alpha around the side's normal (alpha <= 55 deg, so together they still see
 every part of that side within 60 deg of incidence), at the smallest alpha that clears.
 
+Extra views (``gap_plan``): for the blade surface the passes still miss (the root's trailing edge
+behind the hub and nacelle, a trailing edge facing the tower), single photo stations at an angle
+that sees past what blocks the passes, chosen by greedy set cover among viewpoints that keep the
+clearance, and flown where they lengthen the blade's trajectory least.
+
 Tower and nacelle (fixed, the paper's "determined in advance"): vertical photo columns around the
 tower, flown up and down in turn; a loop along both sides, the rear and the top of the nacelle.
 Stations that would come closer than the required clearance to any part are dropped.
@@ -28,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wtcli.geometry import BLADE_SIDES, Camera, Turbine
+from wtcli.geometry.turbine import SurfaceSamples
 from wtcli.plan.safety import Site
 
 Z = np.array([0.0, 0.0, 1.0])
@@ -528,7 +534,7 @@ def append_chain(chunk: Chunk, site: Site, pp: PassParams, new: list[WP],
         chunk.wps.append(w)
 
 
-# ---- gap filling -------------------------------------------------------------------------------------
+# ---- gap filling ----------------------------------------------------------------------------------
 GAP_MAX_VIEWS = 12  # per blade: a handful of extra photos, never a second survey
 GAP_CANDIDATES = 12000  # candidate viewpoints per blade at most (seeds x directions x distances)
 # Candidate grids, finest first: (off-normal step, step around the normal (deg), distances).
@@ -653,7 +659,8 @@ def insert_views(chunk: Chunk, views: list[tuple[np.ndarray, np.ndarray, str]], 
             continue
         i = int(order[0])
         v1 = connect(site, P[i], pos, pp.leg_required, ground=pp.min_altitude)
-        v2 = connect(site, pos, P[i + 1], pp.leg_required, ground=pp.min_altitude) if v1 is not None else None
+        v2 = None if v1 is None else connect(site, pos, P[i + 1], pp.leg_required,
+                                             ground=pp.min_altitude)
         if v2 is None:
             missed += 1
             continue
@@ -662,8 +669,9 @@ def insert_views(chunk: Chunk, views: list[tuple[np.ndarray, np.ndarray, str]], 
     return missed
 
 
-def gap_plan(turbine: Turbine, samples, covered: np.ndarray, site: Site, pp: PassParams,
-             max_incidence_deg: float, max_distance: float, blades=None
+def gap_plan(turbine: Turbine, samples: SurfaceSamples, covered: np.ndarray, site: Site,
+             pp: PassParams, max_incidence_deg: float, max_distance: float,
+             blades: set[int] | None = None
              ) -> tuple[dict[int, list[tuple[np.ndarray, np.ndarray, str]]], np.ndarray]:
     """``gap_views`` for each blade (all, or those in ``blades``) over its samples that
     ``covered`` misses (``samples``: the turbine's blade ``SurfaceSamples``). Returns
