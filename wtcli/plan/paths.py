@@ -543,8 +543,8 @@ GAP_BORDER = 0.05  # frame margin the candidates keep (coverage itself uses 0.02
 
 
 def gap_views(turbine: Turbine, k: int, pts: np.ndarray, nrm: np.ndarray, area: np.ndarray,
-              site: Site, pp: PassParams, max_incidence_deg: float,
-              max_distance: float) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+              site: Site, pp: PassParams, max_incidence_deg: float, max_distance: float,
+              max_views: int = GAP_MAX_VIEWS) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Extra photo stations for blade k's surface samples (pts, nrm, area) that the passes miss.
 
     Where the passes cannot go (the root's trailing edge faces the hub and nacelle; a blade
@@ -615,7 +615,7 @@ def gap_views(turbine: Turbine, k: int, pts: np.ndarray, nrm: np.ndarray, area: 
     left = np.ones(len(pts), bool)
     views: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     checked = np.zeros(len(C), bool)
-    while len(views) < GAP_MAX_VIEWS and left.any():
+    while len(views) < max_views and left.any():
         gain = (sees & left) @ area
         i = int(np.argmax(gain))
         if gain[i] <= 1e-9:
@@ -683,13 +683,21 @@ def gap_plan(turbine: Turbine, samples: SurfaceSamples, covered: np.ndarray, sit
         idx = np.nonzero((samples.blade == k) & ~covered)[0]
         if (blades is not None and k not in blades) or len(idx) == 0:
             continue
-        views = gap_views(turbine, k, samples.points[idx], samples.normals[idx], samples.area[idx],
-                          site, pp, max_incidence_deg, max_distance)
         out[k] = []
-        for pos, fwd, got in views:
-            side_area = np.bincount(samples.side[idx][got], samples.area[idx][got], len(BLADE_SIDES))
-            out[k].append((pos, fwd, f"{turbine.id}/blade{k + 1}/{BLADE_SIDES[int(np.argmax(side_area))]}"))
-            covered[idx[got]] = True
+        # A second round searches what the first left, on the finer grid fewer samples allow.
+        for _ in range(2):
+            views = gap_views(turbine, k, samples.points[idx], samples.normals[idx],
+                              samples.area[idx], site, pp, max_incidence_deg, max_distance,
+                              GAP_MAX_VIEWS - len(out[k]))
+            for pos, fwd, got in views:
+                side_area = np.bincount(samples.side[idx][got], samples.area[idx][got],
+                                        len(BLADE_SIDES))
+                side = BLADE_SIDES[int(np.argmax(side_area))]
+                out[k].append((pos, fwd, f"{turbine.id}/blade{k + 1}/{side}"))
+                covered[idx[got]] = True
+            idx = idx[~covered[idx]]
+            if not views or len(idx) == 0 or len(out[k]) >= GAP_MAX_VIEWS:
+                break
     return out, covered
 
 
