@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 import time
+from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -44,6 +46,13 @@ def one(seed: int) -> dict:
             "turbines": len(case.turbines), "uavs": len(case.fleet.uavs)}
 
 
+def refusal_kind(message: str) -> str:
+    """A refusal message with its numbers, coordinates and names left out, to count alike ones."""
+    m = re.sub(r"\[[^\]]*\]", "[..]", message)
+    m = re.sub(r"\b(T|U|UAV)\d+\b", r"\1#", m)
+    return re.sub(r"\d+(\.\d+)?", "#", m)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("n", nargs="?", type=int, default=1000)
@@ -59,6 +68,7 @@ def main() -> None:
                "violations": sum(r["violation"] for r in ok),
                "min_margin_over_safe_distance_m": min((r["margin_m"] for r in ok), default=None),
                "turbines_total": sum(r["turbines"] for r in ok), "seconds": round(time.time() - t0, 1),
+               "refusals": dict(Counter(refusal_kind(r["error"]) for r in errs).most_common()),
                "errors": [f"seed {r['seed']}: {r['error']}" for r in errs[:10]]}
     print(json.dumps(summary, indent=1))
     if a.out:

@@ -350,6 +350,109 @@ def random_case(rng: np.random.Generator) -> Mission:
                                      min_side_coverage=0.0, coverage_spacing_m=2.0))
 
 
+# ---- the site's culled clearance ---------------------------------------------------------------------
+def _odd_site(rng: np.random.Generator, n: int):
+    """n turbines a few hundred metres apart, boxes overlapping; every third with odd part sizes
+    (a wide chord, a tiny nacelle and hub, a thick tower)."""
+    from wtcli.plan.safety import Site
+
+    ts = []
+    for i in range(n):
+        R = float(rng.uniform(20, 60))
+        odd = (dict(blade_max_chord=0.2 * R, nacelle_length=1.0, hub_radius=1.0, tower_base_radius=5.0)
+               if i % 3 == 2 else {})
+        ts.append(Turbine.with_rotor_azimuth(
+            float(rng.uniform(0, 360)), id=f"T{i + 1}",
+            base=(float(rng.uniform(-250, 250)), float(rng.uniform(-250, 250)), float(rng.uniform(0, 20))),
+            hub_height=float(rng.uniform(R + 5, R + 50)), rotor_diameter=2 * R,
+            yaw_deg=float(rng.uniform(0, 360)), blade_pitch_deg=float(rng.uniform(60, 90)), **odd))
+    return Site(ts, launch=np.array([-300.0, -300.0, 0.0]))
+
+
+def _probe_points(site, rng: np.random.Generator, cap: float | None, m: int) -> np.ndarray:
+    """Random points, points near the rotors, and points exactly on the borders: corners and
+    faces of every culling box (grown by the horizon, and the part boxes by the cap's cull
+    distance) and the grid's cell borders."""
+    P = [rng.uniform(site.lo.min(axis=0) - 30, site.hi.max(axis=0) + 30, (m, 3))]
+    P += [t.hub_center + rng.normal(0, 0.6 * t.tip_radius, (m // 4, 3)) for t in site.turbines]
+    g = site.horizon if cap is None else site.cull_distance(cap)
+    boxes = list(zip(site.lo, site.hi)) + list(zip((site.part_lo - g).reshape(-1, 3),
+                                                   (site.part_hi + g).reshape(-1, 3)))
+    for lo, hi in boxes:
+        P.append(np.array([[(lo, hi)[(c >> a) & 1][a] for a in range(3)] for c in range(8)]))
+        face = rng.uniform(lo, hi, (6, 3))
+        face[np.arange(6), np.arange(6) % 3] = np.r_[lo, hi]
+        P.append(face)
+    k = np.arange(int(site._shape.max()) + 2)
+    edge = rng.uniform(site.lo.min(axis=0), site.hi.max(axis=0), (len(k), 3))
+    edge[:, 0] = site._origin[0] + k * site._cell
+    edge2 = edge.copy()
+    edge2[:, :2] = site._origin + k[:, None] * site._cell
+    return np.vstack(P + [edge, edge2])
+
+
+def _every_turbine(site, P: np.ndarray, cap: float | None) -> np.ndarray:
+    """The model's clearance to every turbine, no culling, capped at the horizon."""
+    c = site.horizon if cap is None else cap
+    return np.minimum.reduce([t.clearance(P, cap=c) for t in site.turbines] + [np.full(len(P), site.horizon)])
+
+
+def _check_site(site, rng: np.random.Generator, m: int) -> None:
+    from wtcli.geometry.turbine import segment_lower_bound
+    from wtcli.plan.safety import enclosing_box, part_boxes
+
+    for t in site.turbines:  # the boxes hold the whole turbine (its surface, hence the solid)
+        S = t.surface_samples(1.0).points
+        lo, hi = enclosing_box(t)
+        assert ((S >= lo) & (S <= hi)).all()
+        plo, phi = part_boxes(t)
+        assert ((S[:, None] >= plo) & (S[:, None] <= phi)).all(axis=2).any(axis=1).all()
+    for cap in (None, 4.5):
+        P = _probe_points(site, rng, cap, m)
+        # The grid finds exactly the points each grown box holds.
+        for idx, lo, hi in zip(site.near(P), site.lo, site.hi):
+            assert np.array_equal(idx, np.nonzero(((P >= lo) & (P <= hi)).all(axis=1))[0])
+        got, ref = site.clearance(P, cap), _every_turbine(site, P, cap)
+        exact_below = site.horizon * site._taper_min if cap is None else cap
+        low = ref < exact_below
+        assert np.array_equal(got[low], ref[low]), "exact below the cap"
+        assert (got[~low] >= min(exact_below, site.horizon) - 1e-12).all()
+        assert (got <= site.horizon).all()
+        if cap is None:  # the culled turbines' model distance is only dropped, never lowered
+            assert (got >= ref).all()
+        # A lower bound of the true distance: never more than the distance to a surface point.
+        Q = P[rng.choice(len(P), 300, replace=False)]
+        surface = np.vstack([t.surface_samples(1.0).points for t in site.turbines])
+        nearest = np.array([np.linalg.norm(surface - q, axis=1).min() for q in Q])
+        assert (site.clearance(Q, cap) <= nearest + 1e-9).all()
+        # Legs: only the samples inside a box are evaluated, with the same result as all of them.
+        Q0 = P[rng.permutation(len(P))[:400]]
+        Q1 = Q0 + rng.normal(0, 1, Q0.shape) * rng.choice([0.0, 0.3, 4.0, 60.0, 500.0], (len(Q0), 1))
+        Q1[::5, 1:] = Q0[::5, 1:]  # along x only, from a border
+        legs = site.segment_clearance(Q0, Q1, 0.5, cap)
+        assert np.array_equal(legs, segment_lower_bound(lambda X: site.clearance(X, cap), Q0, Q1, 0.5))
+    for x in P[::40]:  # the nearest part, searched nearest box first, is the whole site's
+        best = ("nothing", np.inf)
+        for t in site.turbines:
+            c = t.clearance_by_part(x[None])[0]
+            if c.min() < best[1]:
+                best = (f"{t.id} {t.part_names()[int(np.argmin(c))]}", float(c.min()))
+        assert site.nearest_part(x) == best
+
+
+def test_site_culled_clearance_is_exact_below_the_cap_and_a_lower_bound():
+    rng = np.random.default_rng(5)
+    for n in (1, 3, 7):
+        _check_site(_odd_site(rng, n), rng, 600)
+
+
+@pytest.mark.slow
+def test_site_culled_clearance_many_sites():
+    rng = np.random.default_rng(6)
+    for _ in range(25):
+        _check_site(_odd_site(rng, int(rng.integers(1, 12))), rng, 2000)
+
+
 # ---- turbines.yaml --------------------------------------------------------------------------------------
 def test_sample_yaml_loads_and_converts_lat_lon(tmp_path):
     m = load_mission(SAMPLE)

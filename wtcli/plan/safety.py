@@ -1,19 +1,62 @@
 """Clearance of points and straight legs to every part of every turbine of a site, and the ground.
 
 The distances are the one turbine model's (``Turbine.clearance``, a lower bound of the true
-distance). A turbine far from a point is skipped: its bounding box, grown by ``horizon_m``,
-does not contain the point, so its clearance is at least ``horizon_m`` and the reported value
-is capped there.
+distance). A turbine far from a point is skipped: its bounding box, which encloses every part,
+grown by the cull distance does not contain the point, so the point is farther than that from
+every part of it, and the value reported there (the cull distance) is still a lower bound.
+
+The cull distance is ``horizon_m``, or with a ``cap`` just enough that the model's distance to a
+skipped turbine is provably above the cap: values below the cap are exactly the model's, values
+at or above it are lower bounds (the planner only ever compares them with thresholds up to the
+cap).
+
+Speed: the grown boxes are hashed into a grid of square cells in x/y, so a query point only meets
+the few turbines whose boxes overlap its cell, and a leg is sampled only where it runs through a
+turbine's box; the cost of a query does not grow with the site.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from wtcli.geometry import Turbine
-from wtcli.geometry.turbine import segment_lower_bound
 
 HORIZON_M = 60.0
+MAX_CELLS = 256  # per axis: a site tens of km across still gets a small grid
+
+
+def enclosing_box(t: Turbine) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) corners of an axis-aligned box that holds every part of the turbine.
+
+    The horizontal reach is the historical one (rotor radius + overhang + nacelle length + hub
+    radius), widened where unusual part sizes need more: blades (a section's largest semi-axis
+    around the tip radius), the nacelle box and the tower."""
+    a_max = max(t.blade_root_chord, t.blade_max_chord, t.blade_tip_chord) / 2.0
+    reach = max(t.tip_radius + t.overhang + t.nacelle_length + t.hub_radius,
+                t.overhang + t.tip_radius + a_max,
+                math.hypot(0.6 * t.nacelle_length, 0.5 * t.nacelle_width),
+                t.tower_base_radius, t.tower_top_radius)
+    b = t.base_xyz
+    z_lo = min(b[2], b[2] + t.hub_height - t.tip_radius - a_max)
+    z_hi = max(b[2] + t.hub_height + reach, b[2] + t.hub_height + 0.5 * t.nacelle_height)
+    return np.array([b[0] - reach, b[1] - reach, z_lo]), np.array([b[0] + reach, b[1] + reach, z_hi])
+
+
+def part_boxes(t: Turbine) -> tuple[np.ndarray, np.ndarray]:
+    """(2, 3) lo and hi corners of two boxes that together hold the turbine, tighter than
+    ``enclosing_box``: the rotor with nacelle and hub (up there), and the tower (down to the base)."""
+    lo, hi = enclosing_box(t)
+    a_max = max(t.blade_root_chord, t.blade_max_chord, t.blade_tip_chord) / 2.0
+    b = t.base_xyz
+    rotor_lo = lo.copy()
+    rotor_lo[2] = max(lo[2], b[2] + min(t.hub_height - t.tip_radius - a_max,
+                                        t.hub_height - 0.5 * t.nacelle_height,
+                                        t.hub_height - t.hub_radius))
+    r = max(t.tower_base_radius, t.tower_top_radius)
+    return (np.array([rotor_lo, [b[0] - r, b[1] - r, b[2]]]),
+            np.array([hi, [b[0] + r, b[1] + r, b[2] + t.tower_height]]))
 
 
 class Site:
@@ -21,56 +64,212 @@ class Site:
                  launch: np.ndarray | None = None):
         self.turbines = list(turbines)
         self.horizon = float(horizon_m)
-        lo, hi = [], []
-        for t in self.turbines:
-            reach = t.tip_radius + t.overhang + t.nacelle_length + t.hub_radius
-            b = t.base_xyz
-            lo.append([b[0] - reach, b[1] - reach, b[2]])
-            hi.append([b[0] + reach, b[1] + reach, b[2] + t.hub_height + reach])
-        self.lo = np.array(lo) - self.horizon
-        self.hi = np.array(hi) + self.horizon
+        boxes = [enclosing_box(t) for t in self.turbines]
+        self.box_lo = np.array([b[0] for b in boxes]).reshape(-1, 3)
+        self.box_hi = np.array([b[1] for b in boxes]).reshape(-1, 3)
+        self.lo = self.box_lo - self.horizon
+        self.hi = self.box_hi + self.horizon
+        # Capped queries cull with the two tighter boxes per turbine (their grown union lies
+        # inside the horizon's box, so the grid built for that serves both).
+        parts = [part_boxes(t) for t in self.turbines]
+        self.part_lo = np.array([p[0] for p in parts]).reshape(-1, 2, 3)
+        self.part_hi = np.array([p[1] for p in parts]).reshape(-1, 2, 3)
+        # The model's blade distance is at least this factor times the true distance.
+        self._taper = np.array([t._blade_taper_cos() for t in self.turbines])
+        self._taper_min = float(self._taper.min()) if len(self._taper) else 1.0
         ground = [t.base_xyz for t in self.turbines]
         if launch is not None:
             ground.append(np.asarray(launch, float))
         self.ground_points = np.array(ground)
+        self._build_grid()
+
+    # ---- the grid of boxes ------------------------------------------------------------------
+    def _build_grid(self) -> None:
+        """Cells as large as the largest grown box (so a box overlaps at most 2 x 2 of them), each
+        listing the turbines whose grown box overlaps it (CSR: ``_start``, ``_members``)."""
+        if not self.turbines:
+            self._origin, self._cell, self._shape = np.zeros(2), 1.0, np.array([1, 1])
+            self._start, self._members = np.zeros(2, np.int64), np.zeros(0, np.int64)
+            return
+        lo, hi = self.lo[:, :2], self.hi[:, :2]
+        self._origin = lo.min(axis=0)
+        extent = float((hi.max(axis=0) - self._origin).max())
+        self._cell = max(float((hi - lo).max()), extent / MAX_CELLS, 1e-6)
+        # Cells of the box corners with the same expression as the query points': floor and the
+        # rounded arithmetic are monotone, so a point inside a box always falls in one of its cells.
+        c_lo = np.floor((lo - self._origin) / self._cell).astype(np.int64)
+        c_hi = np.floor((hi - self._origin) / self._cell).astype(np.int64)
+        self._shape = c_hi.max(axis=0) + 1
+        cells, members = [], []
+        for i, (a, b) in enumerate(zip(c_lo, c_hi)):
+            gx, gy = np.meshgrid(np.arange(a[0], b[0] + 1), np.arange(a[1], b[1] + 1), indexing="ij")
+            cells.append((gx * self._shape[1] + gy).ravel())
+            members.append(np.full(gx.size, i, np.int64))
+        cells_a = np.concatenate(cells)
+        order = np.argsort(cells_a, kind="stable")
+        self._members = np.concatenate(members)[order]
+        self._start = np.searchsorted(cells_a[order], np.arange(int(self._shape.prod()) + 1))
+
+    def cull_distance(self, cap: float) -> float:
+        """How far beyond its box a turbine is still evaluated for a query capped at ``cap``.
+
+        Outside, the true distance exceeds it and the model's exceeds ``cap`` (the taper factor
+        is the model's only shortfall); the small addition covers rounding."""
+        return min(self.horizon, cap / self._taper_min + 0.01)
+
+    def _pairs(self, P: np.ndarray, grow: float) -> tuple[np.ndarray, np.ndarray]:
+        """(point index, turbine index) for every point inside a turbine's box grown by ``grow``
+        (<= the horizon), ordered by turbine, then point (the same index sets, in the same order,
+        as testing every box)."""
+        f = np.floor((P[:, :2] - self._origin) / self._cell)
+        # Outside the grid (or NaN): outside every box, by the same monotonicity.
+        ok = ((f >= 0) & (f < self._shape)).all(axis=1)
+        pt = np.nonzero(ok)[0]
+        cell = f[pt, 0].astype(np.int64) * self._shape[1] + f[pt, 1].astype(np.int64)
+        first = self._start[cell]
+        count = self._start[cell + 1] - first
+        pp = np.repeat(pt, count)
+        k = np.arange(len(pp)) - np.repeat(np.cumsum(count) - count, count)
+        tt = self._members[np.repeat(first, count) + k]
+        Q = P[pp]
+        if grow == self.horizon:
+            inside = ((Q >= self.lo[tt]) & (Q <= self.hi[tt])).all(axis=1)
+        else:
+            lo, hi = self.part_lo[tt] - grow, self.part_hi[tt] + grow
+            inside = ((Q[:, None] >= lo) & (Q[:, None] <= hi)).all(axis=2).any(axis=1)
+        pp, tt = pp[inside], tt[inside]
+        order = np.argsort(tt, kind="stable")
+        return pp[order], tt[order]
+
+    def _groups(self, P: np.ndarray, grow: float):
+        """(turbine index, indices of the points in its grown box) for each turbine with any."""
+        pp, tt = self._pairs(P, grow)
+        if len(tt) == 0:
+            return
+        cut = np.r_[0, np.flatnonzero(np.diff(tt)) + 1, len(tt)]
+        for a, b in zip(cut[:-1], cut[1:]):
+            yield int(tt[a]), pp[a:b]
 
     def near(self, points: np.ndarray) -> list[np.ndarray]:
         """Per turbine, the indices of the points inside its grown bounding box."""
-        P = np.atleast_2d(points)
-        return [np.nonzero(((P >= lo) & (P <= hi)).all(axis=1))[0] for lo, hi in zip(self.lo, self.hi)]
+        out = [np.zeros(0, np.int64) for _ in self.turbines]
+        for i, idx in self._groups(np.atleast_2d(np.asarray(points, float)), self.horizon):
+            out[i] = idx
+        return out
 
+    # ---- clearance ------------------------------------------------------------------------------
     def clearance(self, points: np.ndarray, cap: float | None = None) -> np.ndarray:
         """(M,) distance to the nearest part of any turbine (``Turbine.clearance``'s lower bound),
-        capped at the horizon.
+        capped at the horizon, or with ``cap`` at the cull distance (module docstring).
 
         Speed: a part's exact distance is computed only for points whose cheap bound (distance
         to a capsule or cylinder enclosing the part) is below ``cap`` (default: the horizon);
         elsewhere the cheap bound, itself a lower bound of the true distance, stands in."""
         P = np.atleast_2d(np.asarray(points, float))
         cap = self.horizon if cap is None else min(cap, self.horizon)
-        out = np.full(len(P), self.horizon)
-        for t, idx in zip(self.turbines, self.near(P)):
-            if len(idx):
-                out[idx] = np.minimum(out[idx], self._turbine_clearance(t, P[idx], cap))
+        grow = self.cull_distance(cap)
+        out = np.full(len(P), grow)
+        for i, idx in self._groups(P, grow):
+            out[idx] = np.minimum(out[idx], self._turbine_clearance(self.turbines[i], P[idx], cap))
         return out
 
     def _turbine_clearance(self, t: Turbine, P: np.ndarray, cap: float) -> np.ndarray:
         return t.clearance(P, cap=cap)
 
     def nearest_part(self, point: np.ndarray) -> tuple[str, float]:
-        """("T1 blade2", 2.3): the part of any turbine nearest a point, and its distance."""
+        """("T1 blade2", 2.3): the part of any turbine nearest a point, and its distance.
+
+        Turbines are visited nearest box first and the search stops where a box is so far that
+        no part inside can beat the best found: the model's distance is at least the blade taper
+        factor times the true one, which is at least the distance to the box."""
+        x = np.asarray(point, float).reshape(3)
+        box = np.linalg.norm(np.maximum(np.maximum(self.box_lo - x, x - self.box_hi), 0.0), axis=1)
+        bound = box * self._taper * (1 - 1e-9) - 1e-9
+        dist: dict[int, np.ndarray] = {}
+        for i in np.argsort(bound, kind="stable"):
+            if dist and bound[i] > min(float(c.min()) for c in dist.values()):
+                break
+            dist[int(i)] = self.turbines[i].clearance_by_part(x[None])[0]
         best = ("nothing", np.inf)
-        for t in self.turbines:
-            c = t.clearance_by_part(np.atleast_2d(point))[0]
+        for i in sorted(dist):  # as over the whole site: the first turbine at the least distance
+            c = dist[i]
             k = int(np.argmin(c))
             if c[k] < best[1]:
-                best = (f"{t.id} {t.part_names()[k]}", float(c[k]))
+                best = (f"{self.turbines[i].id} {self.turbines[i].part_names()[k]}", float(c[k]))
         return best
 
     def segment_clearance(self, p0: np.ndarray, p1: np.ndarray, step: float = 0.5,
                           cap: float | None = None) -> np.ndarray:
-        """Lower bound of the clearance along each straight leg p0[i] -> p1[i] (capped)."""
-        return segment_lower_bound(lambda pts: self.clearance(pts, cap), p0, p1, step)
+        """Lower bound of the clearance along each straight leg p0[i] -> p1[i] (capped).
+
+        The same samples and bound as ``segment_lower_bound`` (at most ``step`` apart, minus half
+        their spacing), but only the samples inside some turbine's grown box are evaluated: the
+        others are at the cull distance, which every evaluated value is capped at anyway."""
+        p0 = np.atleast_2d(np.asarray(p0, float))
+        p1 = np.atleast_2d(np.asarray(p1, float))
+        if len(p0) == 0:
+            return np.zeros(0)
+        cap = self.horizon if cap is None else min(cap, self.horizon)
+        grow = self.cull_distance(cap)
+        length = np.linalg.norm(p1 - p0, axis=1)
+        n = np.maximum(1, np.ceil(length / step).astype(int))
+        leg, j0, j1 = self._sample_ranges(p0, p1, n, grow)
+        out = np.full(len(p0), grow)
+        if len(leg):
+            count = j1 - j0 + 1
+            seg = np.repeat(leg, count)
+            j = np.repeat(j0, count) + np.arange(len(seg)) - np.repeat(np.cumsum(count) - count, count)
+            t = j / n[seg]  # the very sample points segment_lower_bound takes
+            pts = p0[seg] + (p1 - p0)[seg] * t[:, None]
+            np.minimum.at(out, seg, self.clearance(pts, cap))
+        return out - 0.5 * length / n
+
+    def _sample_ranges(self, p0: np.ndarray, p1: np.ndarray, n: np.ndarray,
+                       grow: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(leg, first, last sample index) of the stretches of each leg inside a turbine's box
+        grown by ``grow``: a slab test against each box whose extent the leg's overlaps.
+
+        Conservative: the boxes get 1 cm more, the entry and exit a slack of 1e-3 of the leg and
+        one sample each side, far beyond the rounding of the slab times (an axis the leg hardly
+        moves along, < 1 um, is tested at its start); samples left out are outside every box
+        (with a cap: both part boxes of every turbine)."""
+        empty = np.zeros(0, np.int64)
+        if not self.turbines:
+            return empty, empty, empty
+        if grow == self.horizon:
+            lo, hi = self.box_lo - (grow + 0.01), self.box_hi + (grow + 0.01)
+        else:
+            lo = self.part_lo.reshape(-1, 3) - (grow + 0.01)
+            hi = self.part_hi.reshape(-1, 3) + (grow + 0.01)
+        a, b = np.minimum(p0, p1), np.maximum(p0, p1)
+        ii, kk = np.nonzero(((a[:, None, :] <= hi[None]) & (b[:, None, :] >= lo[None])).all(axis=2))
+        if len(ii) == 0:
+            return empty, empty, empty
+        A, D, LO, HI = p0[ii], (p1 - p0)[ii], lo[kk], hi[kk]
+        flat = np.abs(D) < 1e-6
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ta, tb = (LO - A) / D, (HI - A) / D
+        within = (A >= LO) & (A <= HI)
+        t_in = np.where(flat, np.where(within, -np.inf, np.inf), np.minimum(ta, tb)).max(axis=1)
+        t_out = np.where(flat, np.where(within, np.inf, -np.inf), np.maximum(ta, tb)).min(axis=1)
+        t_in, t_out = np.maximum(t_in, 0.0) - 1e-3, np.minimum(t_out, 1.0) + 1e-3
+        hit = t_in <= t_out
+        ii, t_in, t_out = ii[hit], t_in[hit], t_out[hit]
+        if len(ii) == 0:
+            return empty, empty, empty
+        m = n[ii]
+        j0 = np.clip(np.floor(t_in * m).astype(np.int64) - 1, 0, m)
+        j1 = np.clip(np.ceil(t_out * m).astype(np.int64) + 1, 0, m)
+        # Merge the overlapping stretches of a leg (a turbine's two boxes, neighbours' boxes):
+        # keyed by leg, a stretch starts a new run where it begins after every earlier one ended.
+        span = int(n.max()) + 2
+        order = np.lexsort((j0, ii))
+        ii, j0, j1 = ii[order], j0[order] + ii[order] * span, j1[order] + ii[order] * span
+        ends = np.maximum.accumulate(j1)
+        new = np.r_[True, j0[1:] > ends[:-1] + 1]
+        first = np.flatnonzero(new)
+        last = np.maximum.reduceat(j1, first)
+        return ii[first], j0[first] - ii[first] * span, last - ii[first] * span
 
     def ground_z(self, points: np.ndarray) -> np.ndarray:
         """Ground level under each point: the height of the nearest turbine base or launch point
