@@ -14,8 +14,8 @@ prediction (``summary.predicted_coverage``, the one coverage measure).
   can see it;
 - ``no_safe_view``: no camera position within ``max_incidence_deg`` of its normal and within the
   GSD distance keeps the planner's clearance (safe distance + margin) from every part;
-- ``occluded_only``: such positions exist but every one has another part on its line of sight
-  (coverage does not model occlusion, so this is only a remark);
+- ``occluded_only``: such positions exist but from every one another part (or the blade itself)
+  is in the way (``Turbine.line_of_sight``, the coverage measure's own test);
 - ``planner``: a safe, clear view exists; the planner's photos miss it (the fixable kind).
 """
 
@@ -81,10 +81,8 @@ def why_missed(t: Turbine, site: Site, samples, missed: np.ndarray, required: fl
             out.append("no_safe_view")
             continue
         C = C[ok]
-        f = np.linspace(0.0, 1.0, 40)[:-2]  # along the sight line, stopping short of the sample
-        line = C[:, None, :] + f[None, :, None] * (x - C)[:, None, :]
-        d = t.clearance_by_part(line.reshape(-1, 3))[:, others].min(axis=1).reshape(len(C), -1)
-        out.append("planner" if (d > 0.02).all(axis=1).any() else "occluded_only")
+        clear = t.line_of_sight(C, np.tile(x, (len(C), 1)))
+        out.append("planner" if clear.any() else "occluded_only")
     return out
 
 

@@ -5,10 +5,12 @@ simulated vehicle really had when each photo was taken (measured coverage).
 
 A surface sample counts as covered when at least one photo has it inside the frame (with a
 small border margin), in front of the camera, at a ground sampling distance no coarser than the
-target (times a tolerance), and seen at an incidence angle (between the surface normal and the
-direction to the camera) of at most ``max_incidence_deg``. Back faces fail the incidence test,
-so a blade's far side is never counted from the near side. Occlusion by *other* parts (a blade
-hidden behind the tower) is not modelled; plans keep the camera on the blade's own side.
+target (times a tolerance), seen at an incidence angle (between the surface normal and the
+direction to the camera) of at most ``max_incidence_deg``, and with nothing in between: the line
+from the camera to the sample passes no part of the sample's turbine (tower, nacelle, hub, any
+blade; ``Turbine.line_of_sight``). Back faces fail the incidence test, so a blade's far side is
+never counted from the near side; a blade behind the tower, or a root behind the hub, is not
+counted either. Other turbines are hundreds of metres away and never occlude.
 """
 
 from __future__ import annotations
@@ -62,18 +64,22 @@ def measure_coverage(samples: SurfaceSamples, camera: Camera, positions: np.ndar
     """Coverage of ``samples`` by photos taken with ``camera``'s intrinsics at the given poses.
 
     positions (P, 3) world; rotations (P, 3, 3) world->camera (as Camera.R). ``border_px`` is a
-    fraction of the image size ignored at each edge (lens falloff, framing error)."""
+    fraction of the image size ignored at each edge (lens falloff, framing error). Occlusion is
+    by ``samples.turbine`` (the turbine ``Turbine.surface_samples`` took them from)."""
     positions = np.asarray(positions, float).reshape(-1, 3)
     rotations = np.asarray(rotations, float).reshape(-1, 3, 3)
     if len(positions) != len(rotations):
         raise ValueError(f"expected as many rotations as positions, got {len(rotations)} and {len(positions)}")
+    if samples.turbine is None:
+        raise ValueError("expected samples from Turbine.surface_samples (with their turbine), got "
+                         "samples without one: occlusion cannot be checked")
     P, N = samples.points, samples.normals
-    covered = np.zeros(len(P), bool)
-    best = np.full(len(P), np.inf)
     cos_max = np.cos(np.radians(max_incidence_deg))
     max_dist = camera.distance_for_gsd(target_gsd_mm * gsd_tolerance)
     mx, my = border_px * camera.width_px, border_px * camera.height_px
-    for pos, R in zip(positions, rotations):
+    # Every (sample, photo) pair that passes the cheap tests; the line of sight comes after.
+    pair_s, pair_p, pair_gsd = [], [], []
+    for j, (pos, R) in enumerate(zip(positions, rotations)):
         rel = P - pos
         dist = np.linalg.norm(rel, axis=1)
         near = dist <= max_dist
@@ -90,7 +96,28 @@ def measure_coverage(samples: SurfaceSamples, camera: Camera, positions: np.ndar
         u = camera.fx * pc[:, 0] / zs + camera.cx
         v = camera.fx * pc[:, 1] / zs + camera.cy
         ok &= (u >= mx) & (u <= camera.width_px - 1 - mx) & (v >= my) & (v <= camera.height_px - 1 - my)
-        hit = idx[ok]
-        covered[hit] = True
-        best[hit] = np.minimum(best[hit], camera.gsd_mm(d_n[ok]))
+        pair_s.append(idx[ok])
+        pair_p.append(np.full(int(ok.sum()), j))
+        pair_gsd.append(camera.gsd_mm(d_n[ok]))
+    covered = np.zeros(len(P), bool)
+    best = np.full(len(P), np.inf)
+    if not pair_s:
+        return Coverage(samples, covered, best)
+    s, p, g = (np.concatenate(a) for a in (pair_s, pair_p, pair_gsd))
+    # Tracing a line of sight costs far more than the tests above, and one clear photo settles a
+    # sample: trace each sample's photos finest GSD first, in rounds of 1, 2, 4, ... per sample,
+    # and stop at the round where one is clear (its finest clear GSD is then in that round).
+    order = np.lexsort((g, s))
+    s, p, g = s[order], p[order], g[order]
+    i = np.arange(len(s))
+    rank = i - np.maximum.accumulate(np.where(np.r_[True, s[1:] != s[:-1]], i, 0))
+    lo, width = 0, 1
+    while lo <= rank.max():
+        sel = np.nonzero((rank >= lo) & (rank < lo + width) & ~covered[s])[0]
+        if len(sel) == 0:
+            break
+        clear = sel[samples.turbine.line_of_sight(positions[p[sel]], P[s[sel]])]
+        np.minimum.at(best, s[clear], g[clear])
+        covered[s[clear]] = True
+        lo, width = lo + width, 2 * width
     return Coverage(samples, covered, best)

@@ -542,10 +542,10 @@ GAP_GRIDS = ((3.0, 10.0, 8), (4.0, 15.0, 6), (6.0, 20.0, 6))
 GAP_BORDER = 0.05  # frame margin the candidates keep (coverage itself uses 0.02)
 
 
-def gap_views(turbine: Turbine, k: int, pts: np.ndarray, nrm: np.ndarray, area: np.ndarray,
+def gap_views(turbine: Turbine, pts: np.ndarray, nrm: np.ndarray, area: np.ndarray,
               site: Site, pp: PassParams, max_incidence_deg: float, max_distance: float,
               max_views: int = GAP_MAX_VIEWS) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """Extra photo stations for blade k's surface samples (pts, nrm, area) that the passes miss.
+    """Extra photo stations for one blade's surface samples (pts, nrm, area) that the passes miss.
 
     Where the passes cannot go (the root's trailing edge faces the hub and nacelle; a blade
     pointing down has its trailing edge facing the tower), a view from further along the span, or
@@ -554,8 +554,9 @@ def gap_views(turbine: Turbine, k: int, pts: np.ndarray, nrm: np.ndarray, area: 
     normal, at distances from the smallest standoff to ``max_distance`` (the caller's GSD limit),
     each aimed at its sample; only those that keep ``pp.required`` from every part and the
     minimum altitude. Greedy set cover by missed area, with margins (incidence 1 deg inside the
-    limit, frame border 5 %); a view's claim counts only samples whose line of sight no other
-    part blocks. Returns [(position, viewing direction, covered mask)].
+    limit, frame border 5 %); a view's claim counts only samples it has a line of sight to
+    (``Turbine.line_of_sight``, the coverage measure's own test). Returns [(position, viewing
+    direction, covered mask)].
     """
     if len(pts) == 0:
         return []
@@ -611,7 +612,6 @@ def gap_views(turbine: Turbine, k: int, pts: np.ndarray, nrm: np.ndarray, area: 
         v = cam.fx * np.einsum("csj,cj->cs", rel, down[sl]) / zs + cam.cy
         sees[sl] = ((dist <= max_distance) & (facing >= cos_lim) & (z > 0.1) & (u >= mx)
                     & (u <= cam.width_px - 1 - mx) & (v >= my) & (v <= cam.height_px - 1 - my))
-    others = [j for j in range(len(turbine.part_names())) if j != k]
     left = np.ones(len(pts), bool)
     views: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     checked = np.zeros(len(C), bool)
@@ -622,11 +622,8 @@ def gap_views(turbine: Turbine, k: int, pts: np.ndarray, nrm: np.ndarray, area: 
             break
         if not checked[i]:  # line of sight to each claimed sample, once per candidate (lazy)
             claim = np.nonzero(sees[i])[0]
-            f = np.linspace(0.0, 1.0, 24)[:-2]
-            line = C[i] + f[None, :, None] * (pts[claim] - C[i])[:, None, :]
-            d = turbine.clearance_by_part(line.reshape(-1, 3), cap=0.05)[:, others]
-            blocked = (d.min(axis=1) < 0.02).reshape(len(claim), -1).any(axis=1)
-            sees[i, claim[blocked]] = False
+            clear = turbine.line_of_sight(np.tile(C[i], (len(claim), 1)), pts[claim])
+            sees[i, claim[~clear]] = False
             checked[i] = True
             continue
         views.append((C[i], F[i], sees[i] & left))
@@ -686,7 +683,7 @@ def gap_plan(turbine: Turbine, samples: SurfaceSamples, covered: np.ndarray, sit
         out[k] = []
         # A second round searches what the first left, on the finer grid fewer samples allow.
         for _ in range(2):
-            views = gap_views(turbine, k, samples.points[idx], samples.normals[idx],
+            views = gap_views(turbine, samples.points[idx], samples.normals[idx],
                               samples.area[idx], site, pp, max_incidence_deg, max_distance,
                               GAP_MAX_VIEWS - len(out[k]))
             for pos, fwd, got in views:
