@@ -5,7 +5,7 @@ Random sites: 1-3 turbines (rotor radius 20-75 m, any yaw, stop angle and blade 
 checked independently with the one turbine model: Turbine.clearance on every waypoint and
 Turbine.segment_clearance on every leg, against every turbine.
 
-    python benchmarks/plan_property.py [N] [--jobs J] [--out summary.json] [--log cases.jsonl]
+    python benchmarks/plan_property.py [N] [--start SEED] [--jobs J] [--out summary.json] [--log cases.jsonl]
 """
 
 from __future__ import annotations
@@ -57,13 +57,14 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("n", nargs="?", type=int, default=1000)
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--start", type=int, default=10_000, help="first seed (continue a stopped run)")
     ap.add_argument("--out", default=None)
     ap.add_argument("--log", default=None, help="append each case's result as a JSON line (as they come)")
     a = ap.parse_args()
     t0 = time.time()
     res = []
     with ProcessPoolExecutor(a.jobs) as ex:
-        for r in ex.map(one, range(10_000, 10_000 + a.n), chunksize=4):
+        for r in ex.map(one, range(a.start, a.start + a.n), chunksize=4):
             res.append(r)
             if a.log:
                 with open(a.log, "a") as f:
