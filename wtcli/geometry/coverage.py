@@ -57,6 +57,27 @@ class Coverage:
         return self.fraction(self.samples.blade < 0)
 
 
+def imaged(rel: np.ndarray, normals: np.ndarray, rotations: np.ndarray, camera: Camera,
+           max_distance: float, max_incidence_deg: float, border: float) -> np.ndarray:
+    """The coverage tests short of the line of sight, for any broadcast of cameras and samples.
+
+    rel (..., 3): sample minus camera position; normals (..., 3); rotations (..., 3, 3)
+    world->camera. True where the sample is within ``max_distance``, faces the camera within
+    the incidence limit, lies in front of it and inside the frame less ``border`` (a fraction of
+    the image size) at each edge. The planner's extra-view search asks the same question with
+    tighter margins."""
+    dist = np.linalg.norm(rel, axis=-1)
+    facing = -np.einsum("...j,...j->...", rel, normals) / np.maximum(dist, 1e-9)
+    pc = np.einsum("...j,...kj->...k", rel, rotations)
+    z = pc[..., 2]
+    zs = np.where(z > 0.1, z, 1.0)
+    u = camera.fx * pc[..., 0] / zs + camera.cx
+    v = camera.fx * pc[..., 1] / zs + camera.cy
+    mx, my = border * camera.width_px, border * camera.height_px
+    return ((dist <= max_distance) & (facing >= np.cos(np.radians(max_incidence_deg))) & (z > 0.1)
+            & (u >= mx) & (u <= camera.width_px - 1 - mx) & (v >= my) & (v <= camera.height_px - 1 - my))
+
+
 def measure_coverage(samples: SurfaceSamples, camera: Camera, positions: np.ndarray,
                      rotations: np.ndarray, target_gsd_mm: float,
                      max_incidence_deg: float = 60.0, gsd_tolerance: float = 1.05,
@@ -74,31 +95,18 @@ def measure_coverage(samples: SurfaceSamples, camera: Camera, positions: np.ndar
         raise ValueError("expected samples from Turbine.surface_samples (with their turbine), got "
                          "samples without one: occlusion cannot be checked")
     P, N = samples.points, samples.normals
-    cos_max = np.cos(np.radians(max_incidence_deg))
     max_dist = camera.distance_for_gsd(target_gsd_mm * gsd_tolerance)
-    mx, my = border_px * camera.width_px, border_px * camera.height_px
     # Every (sample, photo) pair that passes the cheap tests; the line of sight comes after.
     pair_s, pair_p, pair_gsd = [], [], []
     for j, (pos, R) in enumerate(zip(positions, rotations)):
         rel = P - pos
-        dist = np.linalg.norm(rel, axis=1)
-        near = dist <= max_dist
-        if not near.any():
+        idx = np.nonzero(np.linalg.norm(rel, axis=1) <= max_dist)[0]
+        if not len(idx):
             continue
-        idx = np.nonzero(near)[0]
-        rel_n, d_n = rel[idx], dist[idx]
-        facing = -(np.einsum("ij,ij->i", rel_n, N[idx])) / np.maximum(d_n, 1e-9)
-        ok = facing >= cos_max
-        pc = rel_n @ R.T
-        z = pc[:, 2]
-        ok &= z > 0.1
-        zs = np.where(ok, z, 1.0)
-        u = camera.fx * pc[:, 0] / zs + camera.cx
-        v = camera.fx * pc[:, 1] / zs + camera.cy
-        ok &= (u >= mx) & (u <= camera.width_px - 1 - mx) & (v >= my) & (v <= camera.height_px - 1 - my)
+        ok = imaged(rel[idx], N[idx], R, camera, max_dist, max_incidence_deg, border_px)
         pair_s.append(idx[ok])
         pair_p.append(np.full(int(ok.sum()), j))
-        pair_gsd.append(camera.gsd_mm(d_n[ok]))
+        pair_gsd.append(camera.gsd_mm(np.linalg.norm(rel[idx[ok]], axis=1)))
     covered = np.zeros(len(P), bool)
     best = np.full(len(P), np.inf)
     if not pair_s:

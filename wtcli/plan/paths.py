@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wtcli.geometry import BLADE_SIDES, Camera, Turbine
+from wtcli.geometry.coverage import imaged
 from wtcli.geometry.turbine import SurfaceSamples
 from wtcli.plan.safety import Site
 
@@ -597,21 +598,12 @@ def gap_views(turbine: Turbine, pts: np.ndarray, nrm: np.ndarray, area: np.ndarr
     right /= rn
     down = np.cross(F, right)
     # Which missed samples each candidate images (the coverage rules, with margins).
-    cam = pp.camera
-    mx, my = GAP_BORDER * cam.width_px, GAP_BORDER * cam.height_px
-    cos_lim = math.cos(math.radians(lim))
+    R = np.stack([right, down, F], axis=1)[:, None]  # (cand, 1, 3, 3) world->camera
     sees = np.zeros((len(C), len(pts)), bool)
     for c0 in range(0, len(C), 1024):
         sl = slice(c0, c0 + 1024)
-        rel = pts[None, :, :] - C[sl, None, :]  # (cand, sample, 3)
-        dist = np.linalg.norm(rel, axis=2)
-        facing = -np.einsum("csj,sj->cs", rel, nrm) / np.maximum(dist, 1e-9)
-        z = np.einsum("csj,cj->cs", rel, F[sl])
-        zs = np.where(z > 0.1, z, 1.0)
-        u = cam.fx * np.einsum("csj,cj->cs", rel, right[sl]) / zs + cam.cx
-        v = cam.fx * np.einsum("csj,cj->cs", rel, down[sl]) / zs + cam.cy
-        sees[sl] = ((dist <= max_distance) & (facing >= cos_lim) & (z > 0.1) & (u >= mx)
-                    & (u <= cam.width_px - 1 - mx) & (v >= my) & (v <= cam.height_px - 1 - my))
+        sees[sl] = imaged(pts[None, :, :] - C[sl, None, :], nrm, R[sl], pp.camera, max_distance,
+                          lim, GAP_BORDER)
     left = np.ones(len(pts), bool)
     views: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     checked = np.zeros(len(C), bool)
