@@ -109,13 +109,13 @@ def test_cli_missing_model_exits_7(cli, tmp_path):
 # ---- inference helpers -----------------------------------------------------------------------
 def test_large_image_is_downscaled_and_masks_come_back_full_size(random_model, monkeypatch):
     seen = []
-    real = random_model.forward
+    real = random_model.transform.forward
 
     def spy(images, targets=None):
         seen.append(tuple(images[0].shape[-2:]))
         return real(images, targets)
 
-    monkeypatch.setattr(random_model, "forward", spy)
+    monkeypatch.setattr(random_model.transform, "forward", spy)
     big = cv2.resize(_image(), (2400, 1800), interpolation=cv2.INTER_LINEAR)
     inst = infer.predict(random_model, big, score_threshold=0.0, max_size=320)
     assert max(seen[0]) <= 320
@@ -260,3 +260,79 @@ def test_pitch_on_a_photo_segments_it_first(cli, tmp_path, random_weights, monke
     res = cli("pitch", tmp_path / "photo.jpg")
     assert res.exit_code in (0, ExitCode.PERCEPTION), res.stderr
     assert "unexpected" not in res.stderr and "segment` on it first" not in res.stderr
+
+
+def _bar(h: int, w: int, angle: float, width: float, length: float) -> np.ndarray:
+    m = np.zeros((h, w), np.uint8)
+    pts = cv2.boxPoints(((w / 2 + 13.3, h / 2 - 7.7), (length, width), angle))
+    cv2.fillPoly(m, [np.round(pts * 16).astype(np.int32)], 1, shift=4)
+    return m.astype(bool)
+
+
+def _training_target(mask: np.ndarray, m: int = 28) -> tuple[np.ndarray, np.ndarray]:
+    """What the mask head learns for a perfect box: torchvision's own target projection."""
+    from torchvision.models.detection.roi_heads import project_masks_on_boxes
+
+    box = torch.tensor(infer_box(mask)[None], dtype=torch.float32)
+    soft = project_masks_on_boxes(torch.from_numpy(mask[None].astype(np.uint8)), box, torch.tensor([0]), m)
+    return soft[0].numpy(), box[0].numpy()
+
+
+def infer_box(mask: np.ndarray) -> np.ndarray:
+    from wtcli.masks import mask_box
+
+    return mask_box(mask)
+
+
+@pytest.mark.parametrize("angle", [0, 90, 20])
+def test_paste_mask_puts_a_thin_blade_back_where_it_was(angle):
+    from torchvision.models.detection.roi_heads import paste_masks_in_image
+
+    truth = _bar(480, 640, angle, 6, 160)
+    soft, box = _training_target(truth)
+    ours = np.zeros_like(truth)
+    infer.paste_mask(ours, soft, box, 1.0, 1.0, offset=0.5)
+    theirs = paste_masks_in_image(torch.from_numpy(soft)[None, None], torch.from_numpy(box)[None],
+                                  (480, 640))[0, 0].numpy() >= 0.5
+    assert mask_iou(ours, truth) >= 0.8
+    assert mask_iou(ours, truth) >= mask_iou(theirs, truth) + 0.05  # why we paste ourselves
+    # An offset on the wrong side moves the blade off itself.
+    shifted = np.zeros_like(truth)
+    infer.paste_mask(shifted, soft, box, 1.0, 1.0, offset=-1.5)
+    assert mask_iou(shifted, truth) < mask_iou(ours, truth) - 0.1
+
+
+def test_paste_mask_scales_back_to_the_full_photo():
+    full = _bar(960, 1280, 90, 12, 600)
+    work = cv2.resize(full.astype(np.float32), (640, 480), interpolation=cv2.INTER_AREA) >= 0.5
+    soft, box = _training_target(work)
+    out = np.zeros_like(full)
+    infer.paste_mask(out, soft, box, 2.0, 2.0, offset=0.5)
+    assert mask_iou(out, full) >= 0.9
+    ys, xs = np.nonzero(out)
+    ty, tx = np.nonzero(full)
+    assert abs(xs.mean() - tx.mean()) < 0.6 and abs(ys.mean() - ty.mean()) < 0.6
+
+
+def test_training_resize_keeps_masks_on_their_pixels():
+    """Masks are resized by area with the image, not nearest (which shifts them by up to
+    half a pixel, always the same way): over many bar positions the centre stays unbiased."""
+    model = build_model()
+    model.train()
+    model.transform.min_size, model.transform.max_size = (384,), 555
+    errs, nearest_errs = [], []
+    for x0 in range(100, 140):
+        mask = torch.zeros(1, 480, 640, dtype=torch.uint8)
+        mask[0, 100:300, x0:x0 + 6] = 1
+        target = {"boxes": torch.tensor([[float(x0), 100, x0 + 6.0, 300]]), "labels": torch.tensor([1]),
+                  "masks": mask.clone()}
+        images, targets = model.transform([torch.rand(3, 480, 640)], [target])
+        assert images.tensors.shape[-2:] == (384, 512)
+        true_centre = (x0 + 3.0) * 0.8
+        xs = np.nonzero(targets[0]["masks"][0].numpy())[1]
+        errs.append(xs.mean() + 0.5 - true_centre)
+        near = torch.nn.functional.interpolate(mask[:, None].float(), size=(384, 512))[0, 0].numpy()
+        nearest_errs.append(np.nonzero(near)[1].mean() + 0.5 - true_centre)
+        assert targets[0]["boxes"][0, [0, 2]].tolist() == pytest.approx([x0 * 0.8, (x0 + 6) * 0.8])
+    assert abs(np.mean(errs)) < 0.05 and np.max(np.abs(errs)) <= 0.5
+    assert abs(np.mean(nearest_errs)) > 0.2  # what torchvision's own resize would have done

@@ -137,8 +137,9 @@ def augment(s: Sample, rng: np.random.Generator) -> Sample:
         y0, x0 = int(rng.integers(0, h - ch + 1)), int(rng.integers(0, w - cw + 1))
         img = cv2.resize(np.ascontiguousarray(img[y0:y0 + ch, x0:x0 + cw]), (w, h),
                          interpolation=cv2.INTER_LINEAR)
-        masks = np.stack([cv2.resize(np.ascontiguousarray(m[y0:y0 + ch, x0:x0 + cw]).astype(np.uint8),
-                                     (w, h), interpolation=cv2.INTER_NEAREST).astype(bool)
+        # Masks scaled like the image (bilinear, then >= 0.5): nearest would shift them.
+        masks = np.stack([cv2.resize(np.ascontiguousarray(m[y0:y0 + ch, x0:x0 + cw]).astype(np.float32),
+                                     (w, h), interpolation=cv2.INTER_LINEAR) >= 0.5
                           for m in masks]) if len(masks) else np.zeros((0, h, w), bool)
     img = np.ascontiguousarray(img).astype(np.float32)
     if rng.random() < 0.8:

@@ -28,6 +28,7 @@ import torch
 from wtcli.errors import ConfigError, InputError, ModelError
 from wtcli.jsonio import atomic_write_bytes, document, write_json
 from wtcli.segment import data as D
+from wtcli.segment.infer import MASK_OFFSET_PX
 from wtcli.segment.model import (ARCH, TRAIN_MIN_SIZES, build_model, load_weights, pick_device,
                                  save_weights, set_infer_size, set_train_sizes)
 
@@ -238,7 +239,8 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
     model.eval()
     set_infer_size(model)
     save_weights(model, out / "model.pt", meta={"iterations": it, "train_seconds": round(elapsed, 1),
-                                                "data": cfg.data or "synthetic", "seed": cfg.seed})
+                                                "data": cfg.data or "synthetic", "seed": cfg.seed,
+                                                "mask_offset_px": MASK_OFFSET_PX})
     metrics = evaluate_run(model, cfg, device) if cfg.eval_count else {}
     recent = history[-50:]
     summary = {
@@ -277,5 +279,5 @@ def export_checkpoint(ckpt: str | Path, weights: str | Path) -> Path:
     meta = {"iterations": int(state.get("iteration", 0)),
             "train_seconds": round(float(state.get("elapsed_s", 0.0)), 1),
             "data": (state.get("config") or {}).get("data") or "synthetic",
-            "seed": (state.get("config") or {}).get("seed", 0)}
+            "seed": (state.get("config") or {}).get("seed", 0), "mask_offset_px": MASK_OFFSET_PX}
     return save_weights(model, weights, meta=meta)
