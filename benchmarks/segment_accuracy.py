@@ -50,6 +50,10 @@ from wtcli.segment.infer import load_model, predict  # noqa: E402
 from wtcli.segment.model import resolve_weights  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
+# The blade count is also split by how much of the frame the rotor spans (its diameter /
+# frame height). The pipeline's own photo, from S_p at the zone radius, is well above this;
+# below it the turbine is small and far (blades a few pixels wide).
+FILL_WORKING = 0.35
 
 
 def theta_diff(a: float, b: float) -> float:
@@ -86,6 +90,7 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
     views: dict[str, int] = {}
     grounds: dict[str, int] = {}
     front_n = front_right = gt_right = 0
+    by_fill = {"distant": [0, 0], "working": [0, 0]}  # [front views, right count]
     errs, gt_errs = [], []
     t0 = time.perf_counter()
     done = 0
@@ -106,6 +111,9 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
             conf = pred[pred.scores >= 0.5] if len(pred) else pred
             k, e = pitch_errors(conf, s.truth)
             front_right += k == s.truth["blades_visible"]
+            band = by_fill["distant" if s.truth["fill"] < FILL_WORKING else "working"]
+            band[0] += 1
+            band[1] += k == s.truth["blades_visible"]
             errs += e
             k2, e2 = pitch_errors(s.instances, s.truth)
             gt_right += k2 == s.truth["blades_visible"]
@@ -120,6 +128,10 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
         "front_views": front_n,
         "front_right_blade_count": front_right / front_n if front_n else None,
         "front_right_blade_count_on_true_masks": gt_right / front_n if front_n else None,
+        "front_right_blade_count_by_fill": {
+            name: {"front_views": n, "right": r / n if n else None,
+                   "fill": f"< {FILL_WORKING}" if name == "distant" else f">= {FILL_WORKING}"}
+            for name, (n, r) in by_fill.items()},
         "theta_error_mean_deg": float(np.mean(errs)) if errs else None,
         "theta_error_median_deg": float(np.median(errs)) if errs else None,
         "theta_error_p95_deg": float(np.percentile(errs, 95)) if errs else None,
