@@ -1,7 +1,7 @@
 """Run the segmenter on one image: BGR uint8 [H, W, 3] in, ``wtcli.masks.Instances`` out.
 
 Large photos (a 5472x3648 drone frame) are first downscaled so their longer side is at most
-``max_size`` (the network itself works at about 640 px, see ``wtcli.segment.model``); each
+``max_size`` (the network itself works at 480 px high, see ``wtcli.segment.model``); each
 predicted M x M box mask is then pasted straight into the ORIGINAL image size (``paste_mask``)
 and thresholded at 0.5, so masks, boxes and the background-removed image line up with the
 photo. Masks are pasted one instance at a time, into their box only.

@@ -40,9 +40,12 @@ MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
 DEFAULT_WEIGHTS = "wtseg-r18s.pt"
 
 # Image size the network works at (GeneralizedRCNNTransform resizes inside the model):
-# shorter side INFER_MIN_SIZE, longer side at most INFER_MAX_SIZE.
+# shorter side INFER_MIN_SIZE, longer side at most INFER_MAX_SIZE. The shorter side is the
+# scale the model was trained at (larger, e.g. 600, measured worse); the longer side lets a
+# 16:9 drone frame keep that scale (854 x 480, not 640 x 360): real photos' blade / tower IoU
+# 0.569 / 0.687 at 640, 0.608 / 0.709 at 854. A 4:3 render is unchanged.
 INFER_MIN_SIZE = 480
-INFER_MAX_SIZE = 640
+INFER_MAX_SIZE = 854
 TRAIN_MIN_SIZES = (320, 352, 384, 416)
 TRAIN_MAX_SIZE = 555
 FPN_CHANNELS = 128
