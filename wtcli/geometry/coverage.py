@@ -97,21 +97,11 @@ def measure_coverage(samples: SurfaceSamples, camera: Camera, positions: np.ndar
     P, N = samples.points, samples.normals
     max_dist = camera.distance_for_gsd(target_gsd_mm * gsd_tolerance)
     # Every (sample, photo) pair that passes the cheap tests; the line of sight comes after.
-    pair_s, pair_p, pair_gsd = [], [], []
-    for j, (pos, R) in enumerate(zip(positions, rotations)):
-        rel = P - pos
-        idx = np.nonzero(np.linalg.norm(rel, axis=1) <= max_dist)[0]
-        if not len(idx):
-            continue
-        ok = imaged(rel[idx], N[idx], R, camera, max_dist, max_incidence_deg, border_px)
-        pair_s.append(idx[ok])
-        pair_p.append(np.full(int(ok.sum()), j))
-        pair_gsd.append(camera.gsd_mm(np.linalg.norm(rel[idx[ok]], axis=1)))
+    s, p, g = _near_pairs(P, N, positions, rotations, camera, max_dist, max_incidence_deg, border_px)
     covered = np.zeros(len(P), bool)
     best = np.full(len(P), np.inf)
-    if not pair_s:
+    if not len(s):
         return Coverage(samples, covered, best)
-    s, p, g = (np.concatenate(a) for a in (pair_s, pair_p, pair_gsd))
     # Tracing a line of sight costs far more than the tests above, and one clear photo settles a
     # sample: trace each sample's photos finest GSD first, in rounds of 1, 2, 4, ... per sample,
     # and stop at the round where one is clear (its finest clear GSD is then in that round).
@@ -129,3 +119,46 @@ def measure_coverage(samples: SurfaceSamples, camera: Camera, positions: np.ndar
         covered[s[clear]] = True
         lo, width = lo + width, 2 * width
     return Coverage(samples, covered, best)
+
+
+def _near_pairs(P: np.ndarray, N: np.ndarray, positions: np.ndarray, rotations: np.ndarray,
+                camera: Camera, max_dist: float, max_incidence_deg: float,
+                border: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(sample, photo, GSD) of the pairs ``imaged`` passes, photo by photo (photo-major).
+
+    Speed: a photo sees only samples within max_dist, so the samples are hashed into cubes of
+    that size (a little more, against rounding) and each photo tests only the 27 cubes around
+    its own, all photos at once in blocks."""
+    empty = np.zeros(0, np.int64)
+    if len(P) == 0 or len(positions) == 0:
+        return empty, empty, np.zeros(0)
+    cell = max_dist * (1 + 1e-6) + 1e-6
+    origin = P.min(axis=0)
+    ci = np.floor((P - origin) / cell).astype(np.int64)
+    shape = ci.max(axis=0) + 1
+    key = (ci[:, 0] * shape[1] + ci[:, 1]) * shape[2] + ci[:, 2]
+    by_key = np.argsort(key, kind="stable")
+    keys = key[by_key]
+    pc = np.floor((positions - origin) / cell)
+    pc = np.where(np.isfinite(pc), pc, -2).clip(-2, shape.max() + 1).astype(np.int64)
+    off = np.stack(np.meshgrid([-1, 0, 1], [-1, 0, 1], [-1, 0, 1], indexing="ij"), -1).reshape(-1, 3)
+    nb = pc[:, None, :] + off[None]  # (photos, 27, 3)
+    valid = ((nb >= 0) & (nb < shape)).all(axis=2)
+    nk = np.where(valid, (nb[..., 0] * shape[1] + nb[..., 1]) * shape[2] + nb[..., 2], -1)
+    lo = np.where(valid, np.searchsorted(keys, nk, "left"), 0)
+    hi = np.where(valid, np.searchsorted(keys, nk, "right"), 0)
+    out_s, out_p, out_g = [], [], []
+    for j0 in range(0, len(positions), 256):
+        count = (hi[j0:j0 + 256] - lo[j0:j0 + 256]).ravel()
+        first = lo[j0:j0 + 256].ravel()
+        pp = np.repeat(np.repeat(np.arange(j0, j0 + len(hi[j0:j0 + 256])), 27), count)
+        k = np.arange(len(pp)) - np.repeat(np.cumsum(count) - count, count)
+        ss = by_key[np.repeat(first, count) + k]
+        rel = P[ss] - positions[pp]
+        near = np.linalg.norm(rel, axis=1) <= max_dist
+        pp, ss, rel = pp[near], ss[near], rel[near]
+        ok = imaged(rel, N[ss], rotations[pp], camera, max_dist, max_incidence_deg, border)
+        out_s.append(ss[ok])
+        out_p.append(pp[ok])
+        out_g.append(camera.gsd_mm(np.linalg.norm(rel[ok], axis=1)))
+    return np.concatenate(out_s), np.concatenate(out_p), np.concatenate(out_g)
