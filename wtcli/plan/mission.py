@@ -205,7 +205,9 @@ def _yaw_pitch(fwd: np.ndarray) -> tuple[float, float]:
 
 
 def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Mission, site: Site,
-                pp: PassParams) -> Route:
+                pp: PassParams, links: dict | None = None) -> Route:
+    """``links``: {(p bytes, q bytes): via points or None} for legs already ``connect``-ed (in
+    the workers); any other leg is connected here."""
     fl, s = mission.fleet, mission.settings
     v_slow = min(fl.inspection_speed_m_s, fl.max_speed_m_s)
     v_fast = min(fl.cruise_speed_m_s, fl.max_speed_m_s)
@@ -217,7 +219,11 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
     swaps: list[int] = []  # indices of the waypoints that end a battery swap on the ground
 
     def link(p: np.ndarray, q: np.ndarray, comp: str, fast: bool, what: str) -> list[WP]:
-        vias = connect(site, p, q, pp.leg_required, ground=s.min_altitude_m)
+        key = (p.tobytes(), q.tobytes())
+        if links is not None and key in links:
+            vias = links[key]
+        else:
+            vias = connect(site, p, q, pp.leg_required, ground=s.min_altitude_m)
         if vias is None:
             raise PlanError(f"{uav}: no safe straight or detoured path {what} keeping "
                             f"{pp.leg_required:.2f} m from every turbine part")
@@ -340,7 +346,23 @@ def _blade_coverage_from_chunks(t: Turbine, chunks: list[Chunk], camera: Camera,
 
 
 # ---- per-turbine work (run in worker processes for large sites) ----------------------------------------
-def _tour(job: tuple) -> list[Chunk]:
+def _link(job: tuple) -> tuple[tuple[bytes, bytes], list | None]:
+    """One leg ``build_route`` will fly, connected ahead of it (``connect`` is a pure function of
+    its arguments, so the route is the same as when it connects the leg itself)."""
+    site, p, q, leg_required, ground = job
+    return (p.tobytes(), q.tobytes()), connect(site, p, q, leg_required, ground=ground)
+
+
+def _tour(job: tuple) -> tuple[list[Chunk], dict]:
+    """A turbine's chunks, and the links between consecutive ones (``build_route``'s ``links``)."""
+    chunks = _chunks(job)
+    site, pp, s = job[1], job[2], job[3].settings
+    links = dict(_link((site, a.end, b.start, pp.leg_required, s.min_altitude_m))
+                 for a, b in zip(chunks, chunks[1:]))
+    return chunks, links
+
+
+def _chunks(job: tuple) -> list[Chunk]:
     t, site, pp, mission, pattern, gsd_eval = job
     s = mission.settings
     chunks = turbine_chunks(t, site, pp, mission)
@@ -434,10 +456,12 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
 
     # Component trajectories per turbine (adaptive: split flat sides that a single pass misses).
     tours: dict[str, list[Chunk]] = {}
+    links: dict = {}
     notes: list[str] = []
     jobs = [(t, site_plan, pp, mission, pattern, gsd_eval) for t in assumed]
-    for t, chunks in zip(assumed, _map(_tour, jobs, workers)):
+    for t, (chunks, tour_links) in zip(assumed, _map(_tour, jobs, workers)):
         tours[t.id] = chunks
+        links.update(tour_links)
         notes += [n for c in chunks for n in c.notes]
 
     # Visit order and split across UAVs (balanced by estimated flight time).
@@ -453,11 +477,16 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
         cost.append(inner + hops / v_slow + 2 * float(np.linalg.norm(tours[tid][0].start - launch)) / v_fast
                     / max(1, len(order)))
     runs = split_balanced(cost, len(fl.uavs))
+    # The transits from one turbine to the next, in the workers too (a swap flies some from the
+    # launch point instead: build_route connects those itself).
+    hops = [(site_plan, tours[x][-1].end, tours[y][0].start, pp.leg_required, s.min_altitude_m)
+            for a, b in runs for x, y in zip(order[a:b], order[a + 1:b])]
+    links.update(_map(_link, hops, workers))
     routes, assignment = [], {}
     for u, (a, b) in zip(fl.uavs, runs):
         chunks = [c for tid in order[a:b] for c in tours[tid]]
         assignment[u] = order[a:b]
-        routes.append(build_route(u, chunks, launch, mission, site_plan, pp))
+        routes.append(build_route(u, chunks, launch, mission, site_plan, pp, links))
 
     check = check_routes(routes, site_real, launch, s.safe_distance_m, s.min_altitude_m)
     if enforce_safety and (check["waypoint_violations"] or check["leg_violations"]

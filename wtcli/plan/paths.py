@@ -109,7 +109,7 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
     dirs = list(hints or [])
     m = 0.5 * (p + q)
     for x in (m, p, q):  # escape directions from the turbine nearest each of these points
-        t = min(site.turbines, key=lambda t: float(np.linalg.norm(x - t.hub_center)))
+        t = site.nearest_hub(x)
         radial = x - t.hub_center
         radial -= (radial @ t.axis) * t.axis
         if np.linalg.norm(radial) > 1e-6:
@@ -118,7 +118,7 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
         if np.linalg.norm(out) > 1e-6:
             dirs.append(_unit(out))
         dirs += [t.axis, -t.axis]
-    t = min(site.turbines, key=lambda t: float(np.linalg.norm(m - t.hub_center)))
+    t = site.nearest_hub(m)
     dirs += [t.blade_direction(k) for k in range(t.n_blades)]  # around a blade's tip
     side = np.cross(Z, q - p)
     if np.linalg.norm(side) > 1e-6:
@@ -135,14 +135,17 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
             [[q + dist * u] for u in dirs] + [[p + dist * u, q + dist * u] for u in dirs]
         cands += [[p + dist * gp, q + dist * gq]]
         cands += [[p + dist * gp, m + dist * u, q + dist * gq] for u in dirs]
+        vp = np.array([v for c in cands for v in c])
+        vo = np.repeat(np.arange(len(cands)), [len(c) for c in cands])
         if ground is not None:  # height above the local ground (nearest base or launch point)
-            cands = [c for c in cands
-                     if all(v[2] >= site.ground_z(v[None])[0] + ground for v in c)]
+            okg = np.ones(len(cands), bool)
+            np.logical_and.at(okg, vo, vp[:, 2] >= site.ground_z(vp) + ground)
+            cands = [c for c, ok in zip(cands, okg) if ok]
+            vp, vo = vp[okg[vo]], vo[okg[vo]]
+            vo = np.cumsum(okg)[vo] - 1  # renumbered over the candidates kept
         if not cands:
             continue
         # Via points must clear themselves (cheap) before their legs are checked.
-        vp = np.array([v for c in cands for v in c])
-        vo = np.repeat(np.arange(len(cands)), [len(c) for c in cands])
         okv = np.ones(len(cands), bool)
         np.logical_and.at(okv, vo, site.clearance(vp, cap) >= leg_required)
         cands = sorted((cands[i] for i in np.nonzero(okv)[0]),

@@ -81,6 +81,7 @@ class Site:
         if launch is not None:
             ground.append(np.asarray(launch, float))
         self.ground_points = np.array(ground)
+        self._hubs = np.array([t.hub_center for t in self.turbines]).reshape(-1, 3)
         self._build_grid()
 
     # ---- the grid of boxes ------------------------------------------------------------------
@@ -156,6 +157,10 @@ class Site:
         for i, idx in self._groups(np.atleast_2d(np.asarray(points, float)), self.horizon):
             out[i] = idx
         return out
+
+    def nearest_hub(self, point: np.ndarray) -> Turbine:
+        """The turbine whose hub centre is nearest the point (the first such, as ``min`` would)."""
+        return self.turbines[int(np.argmin(np.linalg.norm(self._hubs - point, axis=1)))]
 
     # ---- clearance ------------------------------------------------------------------------------
     def clearance(self, points: np.ndarray, cap: float | None = None) -> np.ndarray:
