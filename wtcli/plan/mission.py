@@ -205,9 +205,13 @@ def _yaw_pitch(fwd: np.ndarray) -> tuple[float, float]:
 
 
 def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Mission, site: Site,
-                pp: PassParams, links: dict | None = None) -> Route:
+                pp: PassParams, links: dict | None = None, times: list[float] | None = None,
+                missing: list | None = None) -> Route | None:
     """``links``: {(p bytes, q bytes): via points or None} for legs already ``connect``-ed (in
-    the workers); any other leg is connected here."""
+    the workers); any other leg is connected here. ``times``: ``chunk_time`` of each chunk, if
+    known. With ``missing``, a dry run: the legs not in ``links`` are appended to it (as (p, q))
+    instead of connected, and no route is returned. The battery decisions do not depend on the
+    via points, so the dry run asks for exactly the legs the real one flies."""
     fl, s = mission.fleet, mission.settings
     v_slow = min(fl.inspection_speed_m_s, fl.max_speed_m_s)
     v_fast = min(fl.cruise_speed_m_s, fl.max_speed_m_s)
@@ -222,6 +226,9 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
         key = (p.tobytes(), q.tobytes())
         if links is not None and key in links:
             vias = links[key]
+        elif missing is not None:
+            missing.append((p, q))
+            vias = []
         else:
             vias = connect(site, p, q, pp.leg_required, ground=s.min_altitude_m)
         if vias is None:
@@ -239,8 +246,8 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
 
     takeoff()
     sortie = _leg_time(launch, above, v_fast, climb)
-    for ch in chunks:
-        t_ch = chunk_time(ch, v_slow, climb)
+    for i, ch in enumerate(chunks):
+        t_ch = times[i] if times is not None else chunk_time(ch, v_slow, climb)
         t_to = _leg_time(wps[-1].pos, ch.start, v_fast, climb)
         t_back = _leg_time(ch.end, above, v_fast, climb) + s.takeoff_altitude_m / climb
         if sortie + t_to + t_ch + t_back > usable:
@@ -264,6 +271,8 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
         wps.extend(ch.wps[1:])
         sortie += t_to + t_ch
     go_home()
+    if missing is not None:
+        return None
     return _timed_route(uav, wps, swaps, v_slow, v_fast, climb, fl.battery_swap_s)
 
 
@@ -346,6 +355,10 @@ def _blade_coverage_from_chunks(t: Turbine, chunks: list[Chunk], camera: Camera,
 
 
 # ---- per-turbine work (run in worker processes for large sites) ----------------------------------------
+def _route(job: tuple) -> Route:
+    return build_route(*job)
+
+
 def _link(job: tuple) -> tuple[tuple[bytes, bytes], list | None]:
     """One leg ``build_route`` will fly, connected ahead of it (``connect`` is a pure function of
     its arguments, so the route is the same as when it connects the leg itself)."""
@@ -353,13 +366,15 @@ def _link(job: tuple) -> tuple[tuple[bytes, bytes], list | None]:
     return (p.tobytes(), q.tobytes()), connect(site, p, q, leg_required, ground=ground)
 
 
-def _tour(job: tuple) -> tuple[list[Chunk], dict]:
-    """A turbine's chunks, and the links between consecutive ones (``build_route``'s ``links``)."""
+def _tour(job: tuple) -> tuple[list[Chunk], dict, list[float]]:
+    """A turbine's chunks, the links between consecutive ones (``build_route``'s ``links``) and
+    each chunk's ``chunk_time``."""
     chunks = _chunks(job)
-    site, pp, s = job[1], job[2], job[3].settings
+    site, pp, s, fl = job[1], job[2], job[3].settings, job[3].fleet
     links = dict(_link((site, a.end, b.start, pp.leg_required, s.min_altitude_m))
                  for a, b in zip(chunks, chunks[1:]))
-    return chunks, links
+    v_slow = min(fl.inspection_speed_m_s, fl.max_speed_m_s)
+    return chunks, links, [chunk_time(c, v_slow, fl.climb_rate_m_s) for c in chunks]
 
 
 def _chunks(job: tuple) -> list[Chunk]:
@@ -390,14 +405,26 @@ def _chunks(job: tuple) -> list[Chunk]:
 
 
 def _photos_of(t: Turbine, routes: list[Route]) -> tuple[np.ndarray, np.ndarray]:
-    pos, rot = [], []
-    prefix = f"{t.id}/"
+    return _photos_by_turbine([t.id], routes)[t.id]
+
+
+def _photos_by_turbine(ids: list[str], routes: list[Route]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per turbine id, the positions and camera rotations of the photos of its components (those
+    named "ID/..."), in route and waypoint order. One pass over the routes for all turbines."""
+    pos: dict[str, list] = {tid: [] for tid in ids}
+    rot: dict[str, list] = {tid: [] for tid in ids}
+    owners: dict[str, list[str]] = {}
     for r in routes:
-        sel = np.nonzero(r.photo & np.array([str(c).startswith(prefix) for c in r.component]))[0]
-        for i in sel:
-            pos.append(r.pos[i])
-            rot.append(_rotation(round(float(r.yaw_deg[i]), 6), round(float(r.gimbal_pitch_deg[i]), 6)))
-    return np.array(pos).reshape(-1, 3), np.array(rot).reshape(-1, 3, 3)
+        for i in np.nonzero(r.photo)[0]:
+            c = str(r.component[i])
+            if c not in owners:
+                owners[c] = [tid for tid in pos if c.startswith(f"{tid}/")]
+            for tid in owners[c]:
+                pos[tid].append(r.pos[i])
+                rot[tid].append(_rotation(round(float(r.yaw_deg[i]), 6),
+                                          round(float(r.gimbal_pitch_deg[i]), 6)))
+    return {tid: (np.array(pos[tid]).reshape(-1, 3), np.array(rot[tid]).reshape(-1, 3, 3))
+            for tid in ids}
 
 
 def _side_coverage(job: tuple) -> tuple[dict, float, float]:
@@ -427,8 +454,8 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
     azimuths: turbine id -> blade rotor azimuths (deg), overriding the YAML.
     enforce_safety: raise PlanError on any clearance/ground violation or coverage shortfall
     (default: True for "adaptive", False for the "fixed-y" baseline, which reports them).
-    workers: processes for the per-turbine work (default: one per CPU from 8 turbines on; the
-    result does not depend on it)."""
+    workers: processes for the per-turbine work, the legs between turbines and the routes
+    (default: one per CPU from 8 jobs on; the result does not depend on it)."""
     if pattern not in PATTERNS:
         raise ConfigError(f"pattern: expected one of {', '.join(PATTERNS)}, got {pattern!r}")
     if enforce_safety is None:
@@ -456,11 +483,12 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
 
     # Component trajectories per turbine (adaptive: split flat sides that a single pass misses).
     tours: dict[str, list[Chunk]] = {}
+    times: dict[str, list[float]] = {}
     links: dict = {}
     notes: list[str] = []
     jobs = [(t, site_plan, pp, mission, pattern, gsd_eval) for t in assumed]
-    for t, (chunks, tour_links) in zip(assumed, _map(_tour, jobs, workers)):
-        tours[t.id] = chunks
+    for t, (chunks, tour_links, tour_times) in zip(assumed, _map(_tour, jobs, workers)):
+        tours[t.id], times[t.id] = chunks, tour_times
         links.update(tour_links)
         notes += [n for c in chunks for n in c.notes]
 
@@ -472,21 +500,25 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
     order = [ids[j] for j in visit_order(starts, launch)]
     cost = []
     for i, tid in enumerate(order):
-        inner = sum(chunk_time(c, v_slow, fl.climb_rate_m_s) for c in tours[tid])
+        inner = sum(times[tid])
         hops = sum(float(np.linalg.norm(a.end - b.start)) for a, b in zip(tours[tid], tours[tid][1:]))
         cost.append(inner + hops / v_slow + 2 * float(np.linalg.norm(tours[tid][0].start - launch)) / v_fast
                     / max(1, len(order)))
     runs = split_balanced(cost, len(fl.uavs))
-    # The transits from one turbine to the next, in the workers too (a swap flies some from the
-    # launch point instead: build_route connects those itself).
-    hops = [(site_plan, tours[x][-1].end, tours[y][0].start, pp.leg_required, s.min_altitude_m)
-            for a, b in runs for x, y in zip(order[a:b], order[a + 1:b])]
-    links.update(_map(_link, hops, workers))
-    routes, assignment = [], {}
+    assignment, jobs = {}, []
     for u, (a, b) in zip(fl.uavs, runs):
-        chunks = [c for tid in order[a:b] for c in tours[tid]]
         assignment[u] = order[a:b]
-        routes.append(build_route(u, chunks, launch, mission, site_plan, pp, links))
+        jobs.append((u, [c for tid in order[a:b] for c in tours[tid]], launch, mission, site_plan,
+                     pp, links, [x for tid in order[a:b] for x in times[tid]]))
+    # The legs between turbines and to and from the launch point, connected in the workers too:
+    # a dry run of each route names them, then the routes are built from them (in parallel).
+    missing: list = []
+    for job in jobs:
+        build_route(*job, missing=missing)
+    legs = {(p.tobytes(), q.tobytes()): (site_plan, p, q, pp.leg_required, s.min_altitude_m)
+            for p, q in missing}
+    links.update(_map(_link, list(legs.values()), workers))
+    routes = _map(_route, jobs, workers)
 
     check = check_routes(routes, site_real, launch, s.safe_distance_m, s.min_altitude_m)
     if enforce_safety and (check["waypoint_violations"] or check["leg_violations"]
@@ -495,7 +527,8 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
                         f"{s.safe_distance_m:g} m)")
 
     coverage = {}
-    sides_all = _map(_side_coverage, [(t, _photos_of(t, routes), mission.camera, gsd_eval,
+    photos = _photos_by_turbine([t.id for t in real], routes)
+    sides_all = _map(_side_coverage, [(t, photos[t.id], mission.camera, gsd_eval,
                                        s.coverage_spacing_m, s.max_incidence_deg) for t in real],
                      workers)
     for t, (sides, average, structure) in zip(real, sides_all):
