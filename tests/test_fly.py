@@ -264,10 +264,9 @@ def test_cli_needs_a_scenario(cli, tmp_path):
 
 
 @pytest.mark.slow
-def test_sim_speed_twenty_minutes_under_two_seconds():
-    import time
-
-    # A 20-minute pass pattern: up and down a 60 m line at 2 m/s, with photos.
+def test_twenty_minute_flight_in_turbulence_stays_on_its_path():
+    # A 20-minute pass pattern: up and down a 60 m line at 1 m/s, with photos (the case
+    # benchmarks/fly_speed.py times; speed is a benchmark figure, not a test).
     z = np.r_[np.linspace(10, 70, 31), np.linspace(70, 10, 31)[1:]]
     pts = np.stack([np.zeros_like(z), np.full_like(z, 40.0), z], 1)
     pts = np.concatenate([pts] * 10)
@@ -275,9 +274,10 @@ def test_sim_speed_twenty_minutes_under_two_seconds():
     assert plan.routes[0].duration_s >= 1200 - 60
     scn = default_scenario(wind={"speed_ms": 10, "reference_height_m": 60,
                                  "turbulence": {"intensity": "moderate"}})
-    t0 = time.process_time()  # CPU time: robust to other jobs sharing the machine
-    fly_plan(plan, scn)
-    assert time.process_time() - t0 < 2.0
+    auto = fly_plan(plan, scn).automated
+    assert auto.time_s >= plan.routes[0].duration_s - 1.0
+    assert len(auto.deviation) >= 50 * 1140  # one record per 50 Hz control step, all flight long
+    assert auto.deviation.max() < 1.0 and not auto.violations
 
 
 @pytest.mark.slow

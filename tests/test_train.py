@@ -13,7 +13,7 @@ from wtcli.errors import ConfigError, ExitCode, InputError
 from wtcli.masks import Instances, write_instances
 from wtcli.segment import data as D
 from wtcli.segment.model import build_model, load_weights
-from wtcli.segment.train import TrainConfig, export_checkpoint, lr_factor, train
+from wtcli.segment.train import SYNTH_STRETCH, TrainConfig, _batches, export_checkpoint, lr_factor, train
 
 
 def _tiny(tmp_path, **kw) -> TrainConfig:
@@ -45,7 +45,8 @@ def test_resume_without_checkpoint_is_input_error(tmp_path):
         train(_tiny(tmp_path, resume=True))
 
 
-@pytest.mark.parametrize("kw", [{"iterations": 0}, {"lr": -1.0}, {"width": 8}, {"batch_size": 0}])
+@pytest.mark.parametrize("kw", [{"iterations": 0}, {"lr": -1.0}, {"width": 8}, {"batch_size": 0},
+                                {"train_sizes": ()}, {"train_sizes": (480, 10)}])
 def test_bad_config(tmp_path, kw):
     with pytest.raises(ConfigError):
         train(_tiny(tmp_path, **kw))
@@ -100,3 +101,29 @@ def test_lr_schedule():
 def test_cli_train_bad_data_exit_3(cli, tmp_path):
     res = cli("train", "--data", tmp_path / "nothing", "--out", tmp_path / "r")
     assert res.exit_code == ExitCode.INPUT
+
+
+class _Seeds(torch.utils.data.Dataset):
+    """Stands for the synthetic set: item i is the scene index itself."""
+
+    def __len__(self):
+        return 1_000_000
+
+    def __getitem__(self, i):
+        return int(i)
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_synthetic_scenes_follow_the_seed(tmp_path, seed, monkeypatch):
+    monkeypatch.setattr(D, "collate", lambda b: list(b))
+    cfg = _tiny(tmp_path, seed=seed)
+    it = _batches(_Seeds(), cfg, start_it=0)
+    first = [next(it) for _ in range(3)]
+    assert first == [[seed * SYNTH_STRETCH + 2 * k, seed * SYNTH_STRETCH + 2 * k + 1] for k in range(3)]
+    resumed = next(_batches(_Seeds(), cfg, start_it=2))
+    assert resumed == first[2]
+
+
+def test_cli_train_sizes_not_numbers_exit_3(cli, tmp_path):
+    res = cli("train", "--sizes", "384,big", "--out", tmp_path / "r")
+    assert res.exit_code == ExitCode.INPUT and "--sizes" in res.output

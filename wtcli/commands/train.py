@@ -37,6 +37,9 @@ def train(
     threads: Optional[int] = typer.Option(None, "--threads", min=1,
                                           help="CPU threads for torch (default 1: fastest on a "
                                                "shared CPU; raise it on an idle many-core one)."),
+    sizes: Optional[str] = typer.Option(None, "--sizes",
+                                        help="Shorter sides to train at, e.g. 384,416,448,480 "
+                                             "(default 320,352,384,416; inference uses 480)."),
     no_augment: bool = typer.Option(False, "--no-augment", help="Train on the images as they are."),
     resume: bool = typer.Option(False, "--resume", help="Continue from OUT/last.ckpt."),
     json_out: bool = typer.Option(False, "--json", help="Print the run summary JSON on stdout."),
@@ -47,9 +50,17 @@ def train(
     from wtcli.console import err_console, make_progress
     from wtcli.errors import InputError
     from wtcli.jsonio import document, dumps
+    from wtcli.segment.model import TRAIN_MIN_SIZES
     from wtcli.segment.train import TRAIN_SCHEMA, TrainConfig
     from wtcli.segment.train import train as run_training
 
+    train_sizes = TRAIN_MIN_SIZES
+    if sizes is not None:
+        try:
+            train_sizes = tuple(int(v) for v in sizes.split(","))
+        except ValueError:
+            raise InputError(f"--sizes {sizes!r}: expected whole pixel sizes separated by commas, "
+                             "e.g. 384,416,448,480") from None
     if data is not None and not data.exists():
         raise InputError(f"{data}: no such dataset (a COCO instances JSON or a folder with one)")
     cfg = TrainConfig(out=str(out), data=str(data) if data else None, iterations=iterations,
@@ -57,7 +68,7 @@ def train(
                       width=width, height=height, seed=seed, init=str(init) if init else None,
                       checkpoint_every=checkpoint_every, eval_count=eval_count,
                       val=str(val) if val else None, device=device, workers=workers, threads=threads,
-                      augment=not no_augment, resume=resume)
+                      augment=not no_augment, resume=resume, train_sizes=train_sizes)
     with make_progress() as progress:
         task = progress.add_task("train", total=iterations, status="")
 

@@ -74,6 +74,11 @@ class TrainConfig:
         need(self.checkpoint_every >= 1, "expected --checkpoint-every >= 1")
         need(self.eval_count >= 0, "expected --eval-count >= 0")
         need(self.max_minutes is None or self.max_minutes > 0, "expected --max-minutes > 0")
+        need(len(self.train_sizes) > 0 and all(64 <= v <= 2048 for v in self.train_sizes),
+             f"expected --sizes in 64..2048 px, got {','.join(map(str, self.train_sizes)) or 'none'}")
+
+
+SYNTH_STRETCH = 100_000  # synthetic scenes reserved per seed (runs so far saw < 20 000)
 
 
 def lr_factor(progress: float, it: int, warmup: int) -> float:
@@ -107,7 +112,9 @@ def _batches(ds, cfg: TrainConfig, start_it: int):
     while True:
         g = torch.Generator().manual_seed(cfg.seed * 1_000_003 + epoch)
         if n > 100_000:  # synthetic: a fresh stretch of seeds per epoch; no permutation needed
-            order = (torch.arange(epoch_len * cfg.batch_size) + epoch * epoch_len * cfg.batch_size) % n
+            # Each seed starts its own stretch, so a run continued with a new seed sees new scenes.
+            start = cfg.seed * SYNTH_STRETCH + epoch * epoch_len * cfg.batch_size
+            order = (torch.arange(epoch_len * cfg.batch_size) + start) % n
         else:
             order = torch.randperm(n, generator=g)
             if n < cfg.batch_size:
