@@ -336,3 +336,31 @@ def test_training_resize_keeps_masks_on_their_pixels():
         assert targets[0]["boxes"][0, [0, 2]].tolist() == pytest.approx([x0 * 0.8, (x0 + 6) * 0.8])
     assert abs(np.mean(errs)) < 0.05 and np.max(np.abs(errs)) <= 0.5
     assert abs(np.mean(nearest_errs)) > 0.2  # what torchvision's own resize would have done
+
+
+def _blade_bar(shape, x0, y0, x1, y1):
+    m = np.zeros(shape, bool)
+    m[y0:y1, x0:x1] = True
+    return m
+
+
+def test_duplicate_blade_inside_a_better_one_is_dropped():
+    shape = (120, 200)
+    whole = _blade_bar(shape, 10, 50, 190, 60)  # a horizontal blade
+    part = _blade_bar(shape, 120, 48, 190, 62)  # its outer half again, a bit wider: 75 % inside
+    other = _blade_bar(shape, 95, 0, 105, 55)  # another blade meeting it at the hub: 5/55 inside
+    tower = _blade_bar(shape, 120, 50, 190, 60)  # not a blade: never a duplicate of one
+    masks = np.stack([part, whole, other, tower])
+    boxes = np.array([[120, 48, 190, 62], [10, 50, 190, 60], [95, 0, 105, 55], [120, 50, 190, 60]], float)
+    inst = Instances(np.array(["blade", "blade", "blade", "tower"], dtype=object), masks,
+                     np.array([0.7, 0.9, 0.8, 0.95]), boxes)
+    out = infer.drop_duplicate_blades(inst)
+    assert list(out.labels) == ["blade", "blade", "tower"]
+    assert out.scores.tolist() == [0.9, 0.8, 0.95]
+    # Greedy by score: the lower-scored copy goes, whichever comes first in the list; and the
+    # result at a higher threshold is the same set, thresholded.
+    assert infer.drop_duplicate_blades(inst[[1, 0, 2, 3]]).scores.tolist() == [0.9, 0.8, 0.95]
+    hi = infer.drop_duplicate_blades(inst[inst.scores >= 0.75])
+    assert hi.scores.tolist() == [s for s in out.scores.tolist() if s >= 0.75]
+    # A blade less than the threshold inside another stays.
+    assert len(infer.drop_duplicate_blades(inst, inside=0.8)) == 4

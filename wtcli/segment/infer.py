@@ -24,6 +24,7 @@ from wtcli.segment.model import build_model, load_weights, pick_device, resolve_
 DEFAULT_MAX_SIZE = 1600
 DEFAULT_SCORE_THRESHOLD = 0.5
 MASK_OFFSET_PX = 0.5  # see paste_mask; weights trained with area-resized masks
+DUPLICATE_INSIDE = 0.3  # a blade this much inside a better-scored blade is the same blade
 
 _CACHE: dict[tuple, torch.nn.Module] = {}
 _LOCK = threading.Lock()
@@ -93,7 +94,40 @@ def predict(model: torch.nn.Module, image_bgr: np.ndarray, score_threshold: floa
     boxes[:, [0, 2]] = boxes[:, [0, 2]].clip(0, W)
     boxes[:, [1, 3]] = boxes[:, [1, 3]].clip(0, H)
     names = np.array([LABELS[int(c) - 1] for c in labels], dtype=object)
-    return Instances(names, masks, scores[keep].clip(0, 1), boxes)
+    return drop_duplicate_blades(Instances(names, masks, scores[keep].clip(0, 1), boxes))
+
+
+def drop_duplicate_blades(inst: Instances, inside: float = DUPLICATE_INSIDE) -> Instances:
+    """Drop a blade detection whose mask lies ``inside`` (share of its pixels) or more within a
+    better-scored blade's: the network sometimes proposes a blade twice (whole and a part, two
+    overlapping boxes) that box NMS keeps, and each copy would count as a blade. Distinct blades
+    share only a few pixels at the hub (seen from the side, the hidden one's mask is its visible
+    part). Greedy by score, so the result at any score threshold is this one, thresholded."""
+    idx = np.nonzero(inst.labels == "blade")[0]
+    if len(idx) < 2:
+        return inst
+    idx = idx[np.argsort(-inst.scores[idx], kind="stable")]
+    area = inst.masks[idx].reshape(len(idx), -1).sum(axis=1)
+    kept: list[int] = []
+    drop = []
+    for a, i in enumerate(idx):
+        x0, y0, x1, y1 = inst.boxes[i]
+        dup = area[a] == 0
+        for b in kept:
+            j = idx[b]
+            u0, v0 = int(max(x0, inst.boxes[j][0])), int(max(y0, inst.boxes[j][1]))
+            u1, v1 = int(np.ceil(min(x1, inst.boxes[j][2]))), int(np.ceil(min(y1, inst.boxes[j][3])))
+            if dup or u1 <= u0 or v1 <= v0:
+                continue
+            both = inst.masks[i, v0:v1, u0:u1] & inst.masks[j, v0:v1, u0:u1]
+            dup = int(both.sum()) >= inside * area[a]
+        if dup:
+            drop.append(i)
+        else:
+            kept.append(a)
+    if not drop:
+        return inst
+    return inst[np.setdiff1d(np.arange(len(inst)), drop)]
 
 
 def _detect(model, x: torch.Tensor) -> tuple[dict, tuple[int, int]]:
