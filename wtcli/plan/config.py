@@ -80,7 +80,7 @@ class Settings:
     min_altitude_m: float = 5.0
     takeoff_altitude_m: float = 10.0
     min_side_coverage: float = 0.9
-    coverage_spacing_m: float = 1.0
+    coverage_spacing_m: float = 0.5  # as fly measures; at 1 m a root sample weighs ~2 % of a side
     inspect_tower: bool = True
     inspect_nacelle: bool = True
     tower_columns: int = 0
