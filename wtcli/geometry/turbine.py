@@ -260,8 +260,13 @@ class Turbine:
         q = P - self.hub_center
         s = q @ d
         s0, s1 = self.blade_root_offset, self.tip_radius
-        rho = np.linalg.norm(q - s[:, None] * d, axis=1)
-        A, _ = self.blade_semi_axes((np.clip(s, s0, s1) - s0) / (s1 - s0))
+        r = q - s[:, None] * d
+        rho = np.sqrt((r * r).sum(axis=1))
+        # The chord semi-axis of blade_semi_axes, without the thickness it does not need here.
+        f = (np.clip(s, s0, s1) - s0) / (s1 - s0)
+        A = np.interp(f, *self._cached("chord_knots", lambda: (
+            np.array([0.0, _MAX_CHORD_AT, 1.0]),
+            np.array([self.blade_root_chord, self.blade_max_chord, self.blade_tip_chord])))) / 2.0
         beyond = np.maximum(s - s1, 0.0) + np.maximum(s0 - s, 0.0)
         return np.hypot(np.maximum(rho - A, 0.0) * self._blade_taper_cos(), beyond)
 
@@ -327,12 +332,13 @@ class Turbine:
         return np.maximum(np.linalg.norm(P - self.hub_center, axis=1) - self.hub_radius, 0.0)
 
     def _nacelle_distance(self, P: np.ndarray) -> np.ndarray:
-        a = self.axis
-        side = np.cross(Z, a)
+        a, side, half = self._cached("nacelle_frame", lambda: (
+            self.axis, np.cross(Z, self.axis),
+            np.array([self.nacelle_length, self.nacelle_width, self.nacelle_height]) / 2.0))
         q = P - self.nacelle_center
         local = np.stack([q @ a, q @ side, q @ Z], axis=1)
-        half = np.array([self.nacelle_length, self.nacelle_width, self.nacelle_height]) / 2.0
-        return np.linalg.norm(np.maximum(np.abs(local) - half, 0.0), axis=1)
+        e = np.maximum(np.abs(local) - half, 0.0)
+        return np.sqrt((e * e).sum(axis=1))
 
     def _tower_distance(self, P: np.ndarray) -> np.ndarray:
         q = P - self.base_xyz
