@@ -1,6 +1,6 @@
 """Predicted coverage per blade side over random single turbines, and why samples are missed.
 
-    python benchmarks/plan_coverage.py [--cases 20] [--seed 11] [--spacing 1.0] [--why]
+    python benchmarks/plan_coverage.py [--cases 20] [--seed 11] [--spacing 0.5] [--why]
                                        [--out results.json]
 
 Random turbines: rotor azimuth 0-120 deg, yaw 0-360 deg, rotor diameter 90/120/150 m, hub height
@@ -86,7 +86,7 @@ def why_missed(t: Turbine, site: Site, samples, missed: np.ndarray, required: fl
     return out
 
 
-def run(cases: int, seed: int, why: bool, spacing: float = 1.0) -> dict:
+def run(cases: int, seed: int, why: bool, spacing: float = Settings().coverage_spacing_m) -> dict:
     rng = np.random.default_rng(seed)
     rows, refused = [], []
     reasons: Counter = Counter()
@@ -170,7 +170,8 @@ def main() -> None:
     ap.add_argument("--cases", type=int, default=20)
     ap.add_argument("--seed", type=int, default=11)
     ap.add_argument("--why", action="store_true", help="explain every missed blade sample")
-    ap.add_argument("--spacing", type=float, default=1.0, help="coverage_spacing_m (m)")
+    ap.add_argument("--spacing", type=float, default=Settings().coverage_spacing_m,
+                    help="coverage_spacing_m (m); default: the planner's")
     ap.add_argument("--out", default=None)
     a = ap.parse_args()
     res = run(a.cases, a.seed, a.why, a.spacing)

@@ -544,11 +544,18 @@ GAP_CANDIDATES = 12000  # candidate viewpoints per blade at most (seeds x direct
 # Candidate grids, finest first: (off-normal step, step around the normal (deg), distances).
 GAP_GRIDS = ((3.0, 10.0, 8), (4.0, 15.0, 6), (6.0, 20.0, 6))
 GAP_BORDER = 0.05  # frame margin the candidates keep (coverage itself uses 0.02)
+# Last resort, one sample at a time: where the root's trailing edge meets the nacelle the views
+# that keep the clearance are a shell a few centimetres thick at high incidence, which the
+# grids above step over.
+GAP_FINE_GRID = ((2.0, 6.0, 12),)
+GAP_FINE_CANDIDATES = 24000
+GAP_FINE_SAMPLES = 8  # at most this many samples searched one by one, per blade
 
 
 def gap_views(turbine: Turbine, pts: np.ndarray, nrm: np.ndarray, area: np.ndarray,
               site: Site, pp: PassParams, max_incidence_deg: float, max_distance: float,
-              max_views: int = GAP_MAX_VIEWS) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+              max_views: int = GAP_MAX_VIEWS, grids=GAP_GRIDS, budget: int = GAP_CANDIDATES
+              ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Extra photo stations for one blade's surface samples (pts, nrm, area) that the passes miss.
 
     Where the passes cannot go (the root's trailing edge faces the hub and nacelle; a blade
@@ -567,13 +574,13 @@ def gap_views(turbine: Turbine, pts: np.ndarray, nrm: np.ndarray, area: np.ndarr
     lim = max_incidence_deg - 1.0
     # The views that clear are a thin shell (clearance vs GSD): the fewer samples are missed,
     # the finer the grid each is searched with, within one budget of candidates.
-    for ring, around, n_dist in GAP_GRIDS:
+    for ring, around, n_dist in grids:
         dirs = [(0.0, 0.0)] + [(th, ph) for th in np.arange(ring, lim, ring)
                                 for ph in np.arange(0.0, 360.0, around)]
-        if len(pts) * len(dirs) * n_dist <= GAP_CANDIDATES:
+        if len(pts) * len(dirs) * n_dist <= budget:
             break
     R = np.linspace(pp.min_standoff, max_distance, n_dist)
-    n_seeds = max(1, min(len(pts), GAP_CANDIDATES // (len(dirs) * len(R))))
+    n_seeds = max(1, min(len(pts), budget // (len(dirs) * len(R))))
     seeds = np.unique(np.linspace(0, len(pts) - 1, n_seeds).round().astype(int))
     S, N = pts[seeds], nrm[seeds]
     a = np.cross(N, Z)
@@ -690,6 +697,17 @@ def gap_plan(turbine: Turbine, samples: SurfaceSamples, covered: np.ndarray, sit
             idx = idx[~covered[idx]]
             if not views or len(idx) == 0 or len(out[k]) >= GAP_MAX_VIEWS:
                 break
+        # Then what is left, largest first, one sample at a time on the fine grid.
+        for i in idx[np.argsort(-samples.area[idx], kind="stable")][:GAP_FINE_SAMPLES]:
+            if covered[i] or len(out[k]) >= GAP_MAX_VIEWS:
+                continue
+            views = gap_views(turbine, samples.points[[i]], samples.normals[[i]],
+                              samples.area[[i]], site, pp, max_incidence_deg, max_distance, 1,
+                              GAP_FINE_GRID, GAP_FINE_CANDIDATES)
+            for pos, fwd, _ in views:
+                side = BLADE_SIDES[int(samples.side[i])]
+                out[k].append((pos, fwd, f"{turbine.id}/blade{k + 1}/{side}"))
+                covered[i] = True
     return out, covered
 
 
