@@ -625,3 +625,79 @@ def test_combine_azimuths_wraps_and_matches_blades():
     with pytest.raises(PerceptionError, match="a and c disagree by 12.0 deg"):
         combine_azimuths([[10.0, 130.0, 250.0], [11.0, 131.0, 251.0], [22.0, 142.0, 262.0]],
                          ["a", "b", "c"], "T1")
+
+
+def test_complete_rotor_infers_the_missing_blade_or_refuses():
+    from wtcli.errors import PerceptionError
+    from wtcli.plan.angles import complete_rotor
+
+    az, inferred = complete_rotor([10.0, 130.0], 3, "x")
+    assert inferred == pytest.approx(250.0) and az[:2] == [10.0, 130.0]
+    _, inferred = complete_rotor([355.0, 233.0], 3, "x")  # wraps; 2 deg off even, split evenly
+    assert inferred == pytest.approx(114.0)
+    _, inferred = complete_rotor([0.0, 90.0, 180.0], 4, "x")
+    assert inferred == pytest.approx(270.0)
+    with pytest.raises(PerceptionError, match="not spaced like blades of a 3-blade rotor"):
+        complete_rotor([10.0, 80.0], 3, "photo.jpg: turbine T1")  # 70 deg apart: no rotor
+    with pytest.raises(PerceptionError, match="not spaced"):
+        complete_rotor([10.0, 14.0], 3, "x")  # one blade twice, same slot
+    with pytest.raises(ValueError):
+        complete_rotor([10.0], 3, "x")
+
+
+def test_cli_photo_missing_one_blade_plans_with_the_inferred_blade(cli, tmp_path):
+    """A pitch result with one blade of three (say the segmenter missed one) still plans: the
+    third blade is where the other two leave room, and the output says it was inferred."""
+    from wtcli.jsonio import document, write_json
+    from wtcli.pitch import PITCH_SCHEMA, PITCH_VERSION
+
+    m = load_mission(SAMPLE)
+    t = m.turbine("T2")
+    img = _pitch_image(t)
+    for drop in range(3):
+        short = {**img, "blades": [b for i, b in enumerate(img["blades"]) if i != drop],
+                 "n_blades": 2}
+        pj = tmp_path / f"short{drop}.json"
+        write_json(pj, document(PITCH_SCHEMA, PITCH_VERSION, {"images": [short]}))
+        out = tmp_path / f"plan{drop}.json"
+        r = cli("plan", SAMPLE, f"T2={pj}", "--out", out)
+        assert r.exit_code == 0, r.output
+        said = " ".join(r.output.split())  # the console wraps long lines
+        assert "2 of 3 blades found" in said and "inferred from the rotor's even spacing" in said
+        got = sorted(read_plan(out).turbine("T2").azimuths_deg)
+        for g, w in zip(got, sorted(t.azimuths_deg)):
+            assert abs((g - w + 180) % 360 - 180) < 2.0
+    # One blade of three is not enough to infer two.
+    one = {**img, "blades": img["blades"][:1], "n_blades": 1}
+    write_json(tmp_path / "one.json", document(PITCH_SCHEMA, PITCH_VERSION, {"images": [one]}))
+    r = cli("plan", SAMPLE, f"T2={tmp_path / 'one.json'}", "--out", tmp_path / "p1.json")
+    assert r.exit_code == 5 and "found 1 blade(s)" in r.output
+    assert not (tmp_path / "p1.json").exists()
+
+
+def test_cli_photo_with_a_blade_missed_by_the_segmenter_still_plans(cli, tmp_path, monkeypatch):
+    """The photo path (segment -> contours -> pitch inside plan) keeps a result one blade short
+    for the rotor completion; the segmenter is stood in for by the true masks less one blade."""
+    import cv2
+
+    from wtcli.geometry.render import instance_masks
+    from wtcli.masks import Instances
+    from wtcli.segment import infer
+
+    m = load_mission(SAMPLE)
+    t = m.turbine("T2")
+    cam = default_photo_camera(t, Camera(800, 600, 16, 23.2))
+    inst = instance_masks(t, cam)
+    keep = [i for i, (label, _, _) in enumerate(inst) if label != "blade"] + \
+        [i for i, (label, _, _) in enumerate(inst) if label == "blade"][1:]
+    short = Instances(np.array([inst[i][0] for i in keep], dtype=object),
+                      np.array([inst[i][2] for i in keep]))
+    monkeypatch.setattr(infer, "segment_image", lambda image, **kw: short)
+    photo = tmp_path / "t2.png"
+    cv2.imwrite(str(photo), np.full((600, 800, 3), 200, np.uint8))
+    r = cli("plan", SAMPLE, f"T2={photo}", "--out", tmp_path / "plan.json")
+    assert r.exit_code == 0, r.output
+    assert "2 of 3 blades found" in " ".join(r.output.split())
+    got = sorted(read_plan(tmp_path / "plan.json").turbine("T2").azimuths_deg)
+    for g, w in zip(got, sorted(t.azimuths_deg)):
+        assert abs((g - w + 180) % 360 - 180) < 2.0

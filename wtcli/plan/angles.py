@@ -7,6 +7,7 @@ Which turbine a photo or pitch result belongs to: an ``ID=path`` prefix, else th
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -64,9 +65,12 @@ def _pitch_results(path: Path, expected: int):
     image = read_image(path)
     inst = segment_image(image)
     h, w = image.shape[:2]
-    res = pitch_from_instances(inst, expected_blades=expected,
-                               image={"file_name": path.name, "width": w, "height": h},
-                               source=str(path))
+    kw = {"image": {"file_name": path.name, "width": w, "height": h}, "source": str(path)}
+    # One blade short is kept (blade_azimuths completes the rotor); any other count gets pitch's
+    # own treatment: trimmed to the rotor's blades where that is clear, else refused.
+    res = pitch_from_instances(inst, expected_blades=None, **kw)
+    if len(res.blades) != expected and not (expected >= 3 and len(res.blades) == expected - 1):
+        res = pitch_from_instances(inst, expected_blades=expected, **kw)
     return [(res, path.name)]
 
 
@@ -88,6 +92,34 @@ def check_rotor_spacing(azimuths: list[float], where: str) -> None:
             f"spread like a {n}-blade rotor (gaps {', '.join(f'{g:.0f}' for g in gaps)}, expected "
             f"{360.0 / n:.0f} +- {MAX_SPACING_ERROR_DEG:.0f}): a blade was probably merged or "
             "missed; give a pitch JSON or blade_azimuths_deg in the YAML instead")
+
+
+def complete_rotor(azimuths: list[float], n: int, where: str) -> tuple[list[float], float]:
+    """The azimuths of an ``n``-blade rotor (n >= 3) of which a photo showed ``n - 1`` blades: the
+    missing blade is where the even spacing leaves a slot free. The measured blades fix the
+    rotor's phase (circular mean of n x azimuth); each must have a slot of its own and the gaps
+    between them be within MAX_SPACING_ERROR_DEG of even, else PerceptionError (two blades
+    merged or split, a far rotor's blade).
+    Returns (the measured azimuths and the inferred one last, the inferred one)."""
+    a = np.asarray(azimuths, float) % 360.0
+    if n < 3 or len(a) != n - 1:
+        raise ValueError(f"expected {n - 1} azimuths of a rotor of n >= 3 blades, got {len(a)} of {n}")
+    step = 360.0 / n
+    ang = np.radians(a * n)
+    phase = math.degrees(math.atan2(np.sin(ang).sum(), np.cos(ang).sum())) / n
+    slot = np.round((a - phase) / step).astype(int) % n
+    off = (a - phase - slot * step + 180.0) % 360.0 - 180.0
+    # The spread of the offsets is how far a gap between measured blades is from even, the
+    # figure check_rotor_spacing limits.
+    if len(set(slot.tolist())) != len(a) or off.max() - off.min() > MAX_SPACING_ERROR_DEG:
+        raise PerceptionError(
+            f"{where}: found {len(a)} of {n} blades, at {', '.join(f'{x:.1f}' for x in np.sort(a))} "
+            f"deg, not spaced like blades of a {n}-blade rotor (gaps within "
+            f"{MAX_SPACING_ERROR_DEG:.0f} deg of a multiple of {step:.0f}), so the missing one "
+            "cannot be inferred; give a pitch JSON or blade_azimuths_deg in the YAML instead")
+    free = sorted(set(range(n)) - set(slot.tolist()))[0]
+    inferred = float((phase + free * step) % 360.0)
+    return [float(x) for x in a] + [inferred], inferred
 
 
 # Several photos of one (locked) rotor should agree to within the pitch error; more than this
@@ -137,6 +169,7 @@ def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None 
                 todo.append((t.id, photo))
     per: dict[str, list[tuple[list[float], str]]] = {}
     how: dict[str, str] = {}
+    notes: dict[str, list[str]] = {}
     for tid, path in todo:
         expected = mission.turbine(tid).n_blades if tid else mission.turbines[0].n_blades
         for res, image_name in _pitch_results(path, expected):
@@ -144,7 +177,8 @@ def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None 
             t = mission.turbine(owner)
             name = f"{path}" if not image_name or Path(str(image_name)).name == path.name \
                 else f"{path}:{image_name}"
-            if len(res.blades) != t.n_blades:
+            short = t.n_blades >= 3 and len(res.blades) == t.n_blades - 1
+            if len(res.blades) != t.n_blades and not short:
                 raise PerceptionError(f"{name}: found {len(res.blades)} blade(s), turbine {owner} "
                                       f"has {t.n_blades}")
             p = pose or mission.extra(owner).camera_pose
@@ -152,6 +186,12 @@ def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None 
                 az = azimuths_from_pitch(t, res, mission.camera, p)
             except ValueError as e:
                 raise InputError(f"{name}: {e}") from None
+            if short:
+                az, inferred = complete_rotor(az, t.n_blades, f"{name}: turbine {owner}")
+                az = sorted(az, key=lambda a: (a - 90.0) % 360.0)  # as azimuths_from_pitch
+                notes.setdefault(owner, []).append(
+                    f"{name}: {len(res.blades)} of {t.n_blades} blades found; the blade at "
+                    f"{inferred:.1f} deg is inferred from the rotor's even spacing")
             check_rotor_spacing(az, f"{name}: turbine {owner}")
             per.setdefault(owner, []).append((az, name))
             how[owner] = "the given camera pose" if p else "S_p looking at the rotor centre"
@@ -161,5 +201,6 @@ def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None 
         names = [n for _, n in found]
         azimuths[owner] = combine_azimuths([a for a, _ in found], names, f"turbine {owner}")
         what = names[0] if len(names) == 1 else f"{len(names)} images ({', '.join(names)}), averaged"
-        sources[owner] = f"{what} (back-projected from {how[owner]})"
+        sources[owner] = f"{what} (back-projected from {how[owner]})" + "".join(
+            f"; {n}" for n in notes.get(owner, []))
     return azimuths, sources
