@@ -701,3 +701,27 @@ def test_cli_photo_with_a_blade_missed_by_the_segmenter_still_plans(cli, tmp_pat
     got = sorted(read_plan(tmp_path / "plan.json").turbine("T2").azimuths_deg)
     for g, w in zip(got, sorted(t.azimuths_deg)):
         assert abs((g - w + 180) % 360 - 180) < 2.0
+
+
+@pytest.mark.parametrize("layout", ["grid", "cluster_and_far_launch", "duplicates"])
+def test_site_ground_z_is_the_nearest_base_as_by_comparing_all(layout):
+    """Site.ground_z finds the nearest ground point through a grid of cells; it must pick the
+    same point as comparing every one (the first of equally near ones), wherever the query is."""
+    from wtcli.plan.safety import Site
+
+    rng = np.random.default_rng(3)
+    if layout == "grid":
+        xy = [(400.0 * (i % 6), 400.0 * (i // 6)) for i in range(30)]
+    elif layout == "cluster_and_far_launch":
+        xy = [tuple(rng.uniform(-300, 300, 2)) for _ in range(25)]
+    else:  # bases on top of each other and on cell edges: ties
+        xy = [(100.0 * (i % 5), 100.0 * (i // 5 % 3)) for i in range(30)]
+    ts = [make_turbine(tid=f"T{i}", base=(x, y, float(rng.uniform(0, 30)))) for i, (x, y) in enumerate(xy)]
+    site = Site(ts, launch=np.array([5000.0, -2000.0, 7.0]))
+    lo, hi = site.ground_points[:, :2].min(axis=0) - 800, site.ground_points[:, :2].max(axis=0) + 800
+    P = np.c_[rng.uniform(lo, hi, (4000, 2)), rng.uniform(0, 200, 4000)]
+    P = np.r_[P, site.ground_points + [0, 0, 50], [[5000.0, -2000.0, 60.0], [-1e5, 3e4, 10.0]],
+              np.c_[np.round(P[:200, :2] / 50) * 50, P[:200, 2]]]  # on cell edges, far away
+    d = np.linalg.norm(P[:, None, :2] - site.ground_points[None, :, :2], axis=2)
+    want = site.ground_points[np.argmin(d, axis=1), 2]
+    assert np.array_equal(site.ground_z(P), want)

@@ -25,6 +25,7 @@ from wtcli.geometry import Turbine
 
 HORIZON_M = 60.0
 MAX_CELLS = 256  # per axis: a site tens of km across still gets a small grid
+GROUND_BRUTE_FORCE = 16  # up to this many ground points, the nearest is found by comparing all
 
 
 def enclosing_box(t: Turbine) -> tuple[np.ndarray, np.ndarray]:
@@ -80,7 +81,8 @@ class Site:
         ground = [t.base_xyz for t in self.turbines]
         if launch is not None:
             ground.append(np.asarray(launch, float))
-        self.ground_points = np.array(ground)
+        self.ground_points = np.array(ground).reshape(-1, 3)
+        self._build_ground_grid()
         self._hubs = np.array([t.hub_center for t in self.turbines]).reshape(-1, 3)
         self._build_grid()
 
@@ -278,7 +280,55 @@ class Site:
 
     def ground_z(self, points: np.ndarray) -> np.ndarray:
         """Ground level under each point: the height of the nearest turbine base or launch point
-        (a flat site around each of them)."""
+        (a flat site around each of them; the first of equally near ones)."""
         P = np.atleast_2d(points)
+        G = self.ground_points
+        if len(G) <= GROUND_BRUTE_FORCE or len(P) == 0:
+            return G[self._nearest_ground(P), 2]
+        # The ground points in the 3 x 3 cells around each point's cell: where the nearest of
+        # them is within one cell size, no point further out can be nearer (nor as near).
+        f = np.floor((P[:, :2] - self._g_origin) / self._g_cell)
+        pts, gs = [], []
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                c = f + (dx, dy)
+                ok = ((c >= 0) & (c < self._g_shape)).all(axis=1)
+                pt = np.nonzero(ok)[0]
+                cell = c[pt, 0].astype(np.int64) * self._g_shape[1] + c[pt, 1].astype(np.int64)
+                first, count = self._g_start[cell], self._g_start[cell + 1] - self._g_start[cell]
+                pts.append(np.repeat(pt, count))
+                k = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+                gs.append(self._g_members[np.repeat(first, count) + k])
+        pp, gg = np.concatenate(pts), np.concatenate(gs)
+        d = np.linalg.norm(P[pp, None, :2] - G[gg, None, :2], axis=2)[:, 0]  # as brute force
+        order = np.lexsort((gg, d, pp))  # per point: nearest first, then the lowest index
+        pp, gg, d = pp[order], gg[order], d[order]
+        head = np.r_[True, pp[1:] != pp[:-1]]
+        best = np.full(len(P), -1, np.int64)
+        found = d[head] < self._g_cell * (1 - 1e-9) - 1e-9  # rounding of the cell arithmetic
+        best[pp[head][found]] = gg[head][found]
+        rest = np.nonzero(best < 0)[0]
+        if len(rest):
+            best[rest] = self._nearest_ground(P[rest])
+        return G[best, 2]
+
+    def _nearest_ground(self, P: np.ndarray) -> np.ndarray:
         d = np.linalg.norm(P[:, None, :2] - self.ground_points[None, :, :2], axis=2)
-        return self.ground_points[np.argmin(d, axis=1), 2]
+        return np.argmin(d, axis=1)
+
+    def _build_ground_grid(self) -> None:
+        """Cells of the ground points (CSR: ``_g_start``, ``_g_members``), as large as the
+        typical spacing of the points, so most queries find their nearest in 3 x 3 cells."""
+        G = self.ground_points[:, :2]
+        self._g_origin = G.min(axis=0) if len(G) else np.zeros(2)
+        extent = float((G.max(axis=0) - self._g_origin).max()) if len(G) else 0.0
+        span = (G.max(axis=0) - self._g_origin) if len(G) else np.zeros(2)
+        # About 2 points per cell on an even layout; any size is exact, only speed depends on it.
+        cell = math.sqrt(2.0 * max(float(span[0]), 1.0) * max(float(span[1]), 1.0) / max(len(G), 1))
+        self._g_cell = max(cell, extent / MAX_CELLS, 1e-6)
+        c = np.floor((G - self._g_origin) / self._g_cell).astype(np.int64)
+        self._g_shape = (c.max(axis=0) + 1) if len(G) else np.array([1, 1])
+        key = c[:, 0] * self._g_shape[1] + c[:, 1]
+        order = np.argsort(key, kind="stable")
+        self._g_members = order.astype(np.int64)
+        self._g_start = np.searchsorted(key[order], np.arange(int(self._g_shape.prod()) + 1))
