@@ -301,13 +301,14 @@ class Site:
                 gs.append(self._g_members[np.repeat(first, count) + k])
         pp, gg = np.concatenate(pts), np.concatenate(gs)
         d = np.linalg.norm(P[pp, None, :2] - G[gg, None, :2], axis=2)[:, 0]  # as brute force
-        order = np.lexsort((gg, d, pp))  # per point: nearest first, then the lowest index
-        pp, gg, d = pp[order], gg[order], d[order]
-        head = np.r_[True, pp[1:] != pp[:-1]]
-        best = np.full(len(P), -1, np.int64)
-        found = d[head] < self._g_cell * (1 - 1e-9) - 1e-9  # rounding of the cell arithmetic
-        best[pp[head][found]] = gg[head][found]
-        rest = np.nonzero(best < 0)[0]
+        near = np.full(len(P), np.inf)
+        np.minimum.at(near, pp, d)
+        tie = d == near[pp]  # per point, the nearest candidates: the lowest index of them
+        best = np.full(len(P), len(G), np.int64)
+        np.minimum.at(best, pp[tie], gg[tie])
+        found = near < self._g_cell * (1 - 1e-9) - 1e-9  # rounding of the cell arithmetic
+        best[~found] = -1
+        rest = np.nonzero(~found)[0]
         if len(rest):
             best[rest] = self._nearest_ground(P[rest])
         return G[best, 2]
@@ -323,8 +324,10 @@ class Site:
         self._g_origin = G.min(axis=0) if len(G) else np.zeros(2)
         extent = float((G.max(axis=0) - self._g_origin).max()) if len(G) else 0.0
         span = (G.max(axis=0) - self._g_origin) if len(G) else np.zeros(2)
-        # About 2 points per cell on an even layout; any size is exact, only speed depends on it.
-        cell = math.sqrt(2.0 * max(float(span[0]), 1.0) * max(float(span[1]), 1.0) / max(len(G), 1))
+        # Half the spacing of an even layout: 3 x 3 cells hold a few points, and the points the
+        # planner asks about (within a rotor of a base) find theirs there. Any size is exact;
+        # only the speed depends on it.
+        cell = 0.5 * math.sqrt(max(float(span[0]), 1.0) * max(float(span[1]), 1.0) / max(len(G), 1))
         self._g_cell = max(cell, extent / MAX_CELLS, 1e-6)
         c = np.floor((G - self._g_origin) / self._g_cell).astype(np.int64)
         self._g_shape = (c.max(axis=0) + 1) if len(G) else np.array([1, 1])
