@@ -202,11 +202,16 @@ class Turbine:
     def blade_semi_axes(self, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Semi-axes (chord/2, thickness/2) at span fraction f in [0, 1] (root -> tip)."""
         f = np.clip(np.asarray(f, dtype=float), 0.0, 1.0)
-        fx = [0.0, _MAX_CHORD_AT, 1.0]
-        chord = np.interp(f, fx, [self.blade_root_chord, self.blade_max_chord, self.blade_tip_chord])
-        ratio = np.interp(f, fx, [_ROOT_THICKNESS_RATIO, _MAX_CHORD_THICKNESS_RATIO,
-                                  _TIP_THICKNESS_RATIO])
+        chord = self._blade_chord(f)
+        ratio = np.interp(f, [0.0, _MAX_CHORD_AT, 1.0], [_ROOT_THICKNESS_RATIO,
+                                                        _MAX_CHORD_THICKNESS_RATIO, _TIP_THICKNESS_RATIO])
         return chord / 2.0, ratio * chord / 2.0
+
+    def _blade_chord(self, f: np.ndarray) -> np.ndarray:
+        """Chord at span fraction f in [0, 1] (the planform; the clearance bound needs only it)."""
+        return np.interp(f, *self._cached("chord_knots", lambda: (
+            np.array([0.0, _MAX_CHORD_AT, 1.0]),
+            np.array([self.blade_root_chord, self.blade_max_chord, self.blade_tip_chord]))))
 
     def _blade_taper_cos(self) -> float:
         """cos of the steepest taper of the blade surface: in-section distance times this is
@@ -262,11 +267,7 @@ class Turbine:
         s0, s1 = self.blade_root_offset, self.tip_radius
         r = q - s[:, None] * d
         rho = np.sqrt((r * r).sum(axis=1))
-        # The chord semi-axis of blade_semi_axes, without the thickness it does not need here.
-        f = (np.clip(s, s0, s1) - s0) / (s1 - s0)
-        A = np.interp(f, *self._cached("chord_knots", lambda: (
-            np.array([0.0, _MAX_CHORD_AT, 1.0]),
-            np.array([self.blade_root_chord, self.blade_max_chord, self.blade_tip_chord])))) / 2.0
+        A = self._blade_chord((np.clip(s, s0, s1) - s0) / (s1 - s0)) / 2.0  # blade_semi_axes' A
         beyond = np.maximum(s - s1, 0.0) + np.maximum(s0 - s, 0.0)
         return np.hypot(np.maximum(rho - A, 0.0) * self._blade_taper_cos(), beyond)
 

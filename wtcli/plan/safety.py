@@ -307,7 +307,6 @@ class Site:
         best = np.full(len(P), len(G), np.int64)
         np.minimum.at(best, pp[tie], gg[tie])
         found = near < self._g_cell * (1 - 1e-9) - 1e-9  # rounding of the cell arithmetic
-        best[~found] = -1
         rest = np.nonzero(~found)[0]
         if len(rest):
             best[rest] = self._nearest_ground(P[rest])
@@ -322,8 +321,8 @@ class Site:
         typical spacing of the points, so most queries find their nearest in 3 x 3 cells."""
         G = self.ground_points[:, :2]
         self._g_origin = G.min(axis=0) if len(G) else np.zeros(2)
-        extent = float((G.max(axis=0) - self._g_origin).max()) if len(G) else 0.0
         span = (G.max(axis=0) - self._g_origin) if len(G) else np.zeros(2)
+        extent = float(span.max())
         # Half the spacing of an even layout: 3 x 3 cells hold a few points, and the points the
         # planner asks about (within a rotor of a base) find theirs there. Any size is exact;
         # only the speed depends on it.

@@ -114,13 +114,14 @@ def drop_duplicate_blades(inst: Instances, inside: float = DUPLICATE_INSIDE) -> 
         x0, y0, x1, y1 = inst.boxes[i]
         dup = area[a] == 0
         for b in kept:
-            j = idx[b]
+            if dup:
+                break
+            j = idx[b]  # the masks can overlap only where the boxes do
             u0, v0 = int(max(x0, inst.boxes[j][0])), int(max(y0, inst.boxes[j][1]))
             u1, v1 = int(np.ceil(min(x1, inst.boxes[j][2]))), int(np.ceil(min(y1, inst.boxes[j][3])))
-            if dup or u1 <= u0 or v1 <= v0:
-                continue
-            both = inst.masks[i, v0:v1, u0:u1] & inst.masks[j, v0:v1, u0:u1]
-            dup = int(both.sum()) >= inside * area[a]
+            if u1 > u0 and v1 > v0:
+                both = inst.masks[i, v0:v1, u0:u1] & inst.masks[j, v0:v1, u0:u1]
+                dup = int(both.sum()) >= inside * area[a]
         if dup:
             drop.append(i)
         else:
