@@ -9,11 +9,14 @@
      image where either has the class, averaged;
    * AP50 per class (instances matched greedily by score at mask IoU >= 0.5);
    * front views: share where segment -> contours -> pitch finds exactly the true number of
-     visible blades of the main turbine (``truth["blades_visible"]``);
+     visible blades of the main turbine (``truth["blades_visible"]``), as the CLI does it:
+     instances scoring >= 0.5 counted, blades down to ``CANDIDATE_FLOOR`` (0.2) offered to
+     pitch's rotor completion (docs/pitch.md); ``..._without_completion``: the 0.5 instances
+     alone, as before completion existed;
    * front views: end-to-end blade θ error — segment -> ``wtcli.pitch.pitch_from_instances`` —
-     each measured blade matched to the true blade of nearest φ; |θ error| mod 180. The same
-     pitch run on the TRUE masks is printed beside it, to separate segmentation error from
-     pitch error.
+     each measured blade matched to the true blade of nearest φ; |θ error| mod 180, with and
+     without completion, and over the admitted blades alone. The same pitch run on the TRUE
+     masks is printed beside it, to separate segmentation error from pitch error.
 2. Speed: one 1024 x 683 render, images/s of our model (``predict``, as ``segment`` runs it)
    and of torchvision's stock ``maskrcnn_resnet50_fpn(weights=None, weights_backbone=None)`` on
    the same input tensor, in this one process, same thread count; their ratio. (Untrained stock
@@ -21,7 +24,8 @@
 3. Real photos, when ``--real`` (default ../shared/real-photos beside the repo) exists: blade and tower IoU
    against its semantic masks (0 background, 1 blade, 2 tower incl. nacelle/hub; our tower
    prediction = tower ∪ nacelle), and the blade count on the photos the manifest tags as front
-   views. These photos are for evaluation only: never train on them or copy them into the repo.
+   views (with and without completion). These photos are for evaluation only: never train on
+   them or copy them into the repo.
 
 Results are printed and written as JSON (``--out``, default benchmarks/results/segment_accuracy.json).
 """
@@ -46,6 +50,7 @@ from wtcli.jsonio import document, write_json  # noqa: E402
 from wtcli.masks import Instances  # noqa: E402
 from wtcli.segment.data import HELDOUT_SEED_BASE, image_tensor  # noqa: E402
 from wtcli.segment.evaluate import Evaluator, mask_iou  # noqa: E402
+from wtcli.pitch import CANDIDATE_FLOOR, DEFAULT_SCORE_THRESHOLD  # noqa: E402
 from wtcli.segment.infer import load_model, predict  # noqa: E402
 from wtcli.segment.model import resolve_weights  # noqa: E402
 
@@ -66,21 +71,35 @@ def phi_diff(a: float, b: float) -> float:
     return min(d, 360.0 - d)
 
 
-def pitch_errors(inst: Instances, truth: dict) -> tuple[int, list[float]]:
-    """(blades found, |θ error| of each found blade vs the true blade nearest in φ)."""
+def pitch_errors(inst: Instances, truth: dict, completion: bool = False
+                 ) -> tuple[int, list[float], list[float]]:
+    """(blades found, |θ error| of each found blade vs the true blade nearest in φ, the same
+    for the blades admitted by rotor completion). ``completion``: ``inst`` holds blades down
+    to the candidate floor and pitch counts what scores 0.5 (as the CLI); else all count."""
     from wtcli.pitch import pitch_from_instances
 
     try:
-        res = pitch_from_instances(inst, expected_blades=None)
+        res = pitch_from_instances(inst, expected_blades=None,
+                                   score_threshold=DEFAULT_SCORE_THRESHOLD if completion else None)
     except WtError:
-        return 0, []
+        return 0, [], []
     true = [b for b in truth["blades"] if b.get("visible")]
-    errs = []
+    errs, admitted = [], []
     for b in res.blades:
         if true:
             t = min(true, key=lambda tb: phi_diff(tb["phi_deg"], b.phi_deg))
             errs.append(theta_diff(b.theta_deg, t["theta_deg"]))
-    return len(res.blades), errs
+            if b.admitted_low_score:
+                admitted.append(errs[-1])
+    return len(res.blades), errs, admitted
+
+
+def completion_input(pred: Instances) -> Instances:
+    """What ``segment_image`` hands pitch: instances >= 0.5 and blades >= the candidate floor."""
+    if not len(pred):
+        return pred
+    return pred[(pred.scores >= DEFAULT_SCORE_THRESHOLD)
+                | ((pred.labels == "blade") & (pred.scores >= CANDIDATE_FLOOR))]
 
 
 def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | None = None) -> dict:
@@ -89,9 +108,9 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
     ev = Evaluator(0.5)
     views: dict[str, int] = {}
     grounds: dict[str, int] = {}
-    front_n = front_right = gt_right = 0
-    by_fill = {"distant": [0, 0], "working": [0, 0]}  # [front views, right count]
-    errs, gt_errs = [], []
+    front_n = front_right = front_right0 = gt_right = 0
+    by_fill = {"distant": [0, 0, 0], "working": [0, 0, 0]}  # [front views, right, right w/o]
+    errs, errs0, adm_errs, gt_errs = [], [], [], []
     t0 = time.perf_counter()
     done = 0
     for i in range(n):
@@ -109,13 +128,18 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
         if s.truth["view"] == "front":
             front_n += 1
             conf = pred[pred.scores >= 0.5] if len(pred) else pred
-            k, e = pitch_errors(conf, s.truth)
+            k0, e0, _ = pitch_errors(conf, s.truth)
+            k, e, ea = pitch_errors(completion_input(pred), s.truth, completion=True)
             front_right += k == s.truth["blades_visible"]
+            front_right0 += k0 == s.truth["blades_visible"]
             band = by_fill["distant" if s.truth["fill"] < FILL_WORKING else "working"]
             band[0] += 1
             band[1] += k == s.truth["blades_visible"]
+            band[2] += k0 == s.truth["blades_visible"]
             errs += e
-            k2, e2 = pitch_errors(s.instances, s.truth)
+            errs0 += e0
+            adm_errs += ea
+            k2, e2, _ = pitch_errors(s.instances, s.truth)
             gt_right += k2 == s.truth["blades_visible"]
             gt_errs += e2
         if (i + 1) % 25 == 0:
@@ -126,16 +150,25 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
         "seeds": [HELDOUT_SEED_BASE, HELDOUT_SEED_BASE + done - 1],
         "views": views, "grounds": grounds,
         "front_views": front_n,
+        "rotor_completion": {"score_threshold": DEFAULT_SCORE_THRESHOLD,
+                             "candidate_floor": CANDIDATE_FLOOR},
         "front_right_blade_count": front_right / front_n if front_n else None,
+        "front_right_blade_count_without_completion": front_right0 / front_n if front_n else None,
         "front_right_blade_count_on_true_masks": gt_right / front_n if front_n else None,
         "front_right_blade_count_by_fill": {
             name: {"front_views": n, "right": r / n if n else None,
+                   "right_without_completion": r0 / n if n else None,
                    "fill": f"< {FILL_WORKING}" if name == "distant" else f">= {FILL_WORKING}"}
-            for name, (n, r) in by_fill.items()},
+            for name, (n, r, r0) in by_fill.items()},
         "theta_error_mean_deg": float(np.mean(errs)) if errs else None,
         "theta_error_median_deg": float(np.median(errs)) if errs else None,
         "theta_error_p95_deg": float(np.percentile(errs, 95)) if errs else None,
         "theta_blades_measured": len(errs),
+        "theta_error_mean_without_completion_deg": float(np.mean(errs0)) if errs0 else None,
+        "theta_blades_measured_without_completion": len(errs0),
+        "blades_admitted": len(adm_errs),
+        "theta_error_mean_admitted_deg": float(np.mean(adm_errs)) if adm_errs else None,
+        "theta_error_max_admitted_deg": float(np.max(adm_errs)) if adm_errs else None,
         "theta_error_mean_on_true_masks_deg": float(np.mean(gt_errs)) if gt_errs else None,
         "seconds": time.perf_counter() - t0,
     })
@@ -198,7 +231,7 @@ def real_photos(model, root: Path, log) -> dict:
     else:  # no usable manifest: pair images/X.* with masks/X.png
         for ip in sorted((root / "images").glob("*")):
             items.append((ip, root / "masks" / (ip.stem + ".png"), ""))
-    blade_iou, tower_iou, counts = [], [], []
+    blade_iou, tower_iou, counts, counts0 = [], [], [], []
     errors = []
     for ip, mp, view in items:
         img = cv2.imread(str(ip), cv2.IMREAD_COLOR)
@@ -213,7 +246,8 @@ def real_photos(model, root: Path, log) -> dict:
             sem = sem[:, :, 0]
         if sem.shape != img.shape[:2]:
             sem = cv2.resize(sem, (img.shape[1], img.shape[0]), interpolation=cv2.INTER_NEAREST)
-        pred = predict(model, img, score_threshold=0.5)
+        low = predict(model, img, score_threshold=CANDIDATE_FLOOR)
+        pred = low[low.scores >= 0.5] if len(low) else low  # = predicting at 0.5
         blade = pred.of("blade").union() if len(pred) else np.zeros(sem.shape, bool)
         tower = (pred.of("tower").union() | pred.of("nacelle").union()) if len(pred) else np.zeros(sem.shape, bool)
         blade_iou.append(mask_iou(blade, sem == 1))
@@ -221,18 +255,21 @@ def real_photos(model, root: Path, log) -> dict:
         if "front" in view.lower():
             from wtcli.pitch import pitch_from_instances
 
-            try:
-                k = len(pitch_from_instances(pred, expected_blades=None).blades)
-            except WtError:
-                k = 0
-            counts.append(k)
+            for out, inp in ((counts0, pred), (counts, completion_input(low))):
+                try:
+                    out.append(len(pitch_from_instances(inp, expected_blades=None).blades))
+                except WtError:
+                    out.append(0)
     log(f"  real photos: {len(blade_iou)} evaluated, {len(errors)} unreadable")
     return {"photos": len(blade_iou), "unreadable": errors,
             "blade_iou": float(np.mean(blade_iou)) if blade_iou else None,
             "tower_iou": float(np.mean(tower_iou)) if tower_iou else None,
             "front_views": len(counts),
             "front_blade_count_3": (sum(c == 3 for c in counts) / len(counts)) if counts else None,
-            "front_blade_counts": counts}
+            "front_blade_counts": counts,
+            "front_blade_count_3_without_completion":
+                (sum(c == 3 for c in counts0) / len(counts0)) if counts0 else None,
+            "front_blade_counts_without_completion": counts0}
 
 
 def main(argv: list[str] | None = None) -> dict:

@@ -365,7 +365,7 @@ def test_cli_demo_chain(cli, tmp_path):
             out / "overlays")
     assert r.exit_code == 0, r.stderr
     doc = json.loads((out / "pitch.json").read_text())
-    assert doc["schema"] == PITCH_SCHEMA and doc["schema_version"] == 1
+    assert doc["schema"] == PITCH_SCHEMA and doc["schema_version"] == 2
     img, = doc["images"]
     assert img["error"] is None and img["n_blades"] == 3
     assert [round(b["phi_deg"]) for b in img["blades"]] == [10, 130, 250]
@@ -479,3 +479,147 @@ def test_cli_contours_file_threshold_can_rise_not_fall(cli, tmp_path):
     assert r.exit_code == 0 and json.loads(r.stdout)["images"][0]["area_threshold"] == 100
     one_line_error(cli("pitch", tmp_path / "c.json", "--area-threshold", "1e6"), 5,
                    "no contour above the area threshold")
+
+
+# ---- rotor completion: a low-score blade admitted when the rotor is one short ----------------------
+def scored(inst, scores):
+    return Instances(inst.labels, inst.masks, np.asarray(scores, float))
+
+
+def with_blades(inst, masks, scores):
+    """``inst`` with extra blade masks (and their scores) appended."""
+    return Instances(np.concatenate([inst.labels, ["blade"] * len(masks)]),
+                     np.concatenate([inst.masks, np.stack(masks)]),
+                     np.concatenate([inst.scores, scores]))
+
+
+H, W = 300, 400
+HUB = (200.0, 150.0)
+
+
+def two_and_candidate(phi, score=0.3, nacelle=True, **kw):
+    """Blades at 20 and 140 deg (scores 0.9, 0.8), a nacelle, and a candidate blade at ``phi``."""
+    two = scored(rotor(H, W, [20, 140], 12, hub=HUB, length=120, nacelle=nacelle),
+                 [0.9, 0.8] + ([0.95] if nacelle else []))
+    kw = {"thickness": 12, "length": 120, "hub": HUB, **kw}
+    return with_blades(two, [make_blade_mask(H, W, phi, **kw)], [score])
+
+
+@pytest.mark.parametrize("nacelle", [True, False])
+def test_a_low_score_blade_in_the_free_slot_completes_the_rotor(nacelle):
+    inst = two_and_candidate(255, nacelle=nacelle)
+    cand = len(inst) - 1
+    res = pitch_from_instances(inst)  # expected 3, threshold 0.5, floor 0.2
+    assert len(res) == 3 and res.score_threshold == 0.5 and res.candidate_floor == 0.2
+    assert [b.admitted_low_score for b in res.blades] == [b.source_index == cand for b in res.blades]
+    adm, = res.admitted
+    assert adm.source_index == cand and adm.score == 0.3 and err(adm.phi_deg, 255, 360) < 0.5
+    assert np.hypot(res.hub_px[0] - HUB[0], res.hub_px[1] - HUB[1]) < 3
+    d = res.to_dict()
+    assert [b["admitted_low_score"] for b in d["blades"]] == [False, False, True]
+    # The same instances without completion: two blades, as before.
+    with pytest.raises(PerceptionError, match="found 2 blades"):
+        pitch_from_instances(inst, candidate_floor=None)
+    assert len(pitch_from_instances(inst, expected_blades=None, candidate_floor=None)) == 2
+    # No threshold: every instance counts, as it did before completion existed.
+    res = pitch_from_instances(inst, score_threshold=None)
+    assert len(res) == 3 and not res.admitted and res.score_threshold is None
+
+
+@pytest.mark.parametrize("why, kw", [
+    ("wrong direction", {"phi": 200}),  # 55 deg off the free slot at 260
+    ("duplicates blade 1", {"phi": 22, "thickness": 8}),  # inside the blade at 20 deg
+    ("off the hub", {"phi": 260, "hub": (200 + 60 * math.sin(math.radians(260)),
+                                         150 + 60 * math.cos(math.radians(260)))}),
+    ("root away from the hub", {"phi": 260, "start": 100, "length": 200}),
+    ("below the floor", {"phi": 260, "score": 0.15}),
+    ("too short", {"phi": 260, "length": 22, "start": 2}),  # < 1/4 of the blades
+])
+def test_a_low_score_blade_that_does_not_fit_is_not_admitted(why, kw):
+    kw = dict(kw)
+    phi = kw.pop("phi")
+    inst = two_and_candidate(phi, **kw)
+    res = pitch_from_instances(inst, expected_blades=None)
+    assert len(res) == 2 and not res.admitted, why
+    with pytest.raises(PerceptionError, match="found 2 blades"):
+        pitch_from_instances(inst)
+
+
+def test_nothing_is_admitted_when_the_confident_blades_are_enough():
+    three = scored(rotor(H, W, [20, 140, 260], 12, hub=HUB, length=120), [0.9, 0.8, 0.7, 0.9])
+    inst = with_blades(three, [make_blade_mask(H, W, 80, 12, hub=HUB, length=120)], [0.45])
+    res = pitch_from_instances(inst)
+    assert len(res) == 3 and not res.admitted
+    assert sorted(round(p) for p in res.phis) == [20, 140, 260]
+
+
+def test_best_scored_first_and_at_most_the_number_missing():
+    two = two_and_candidate(258, score=0.3)
+    inst = with_blades(two, [make_blade_mask(H, W, 262, 10, hub=HUB, length=110, start=30)],
+                       [0.4])
+    res = pitch_from_instances(inst, expected_blades=None)
+    adm, = res.admitted
+    assert adm.score == 0.4 and len(res) == 3
+
+
+def test_a_four_blade_rotor_is_completed_to_its_count():
+    three = scored(rotor(H, W, [10, 100, 190], 12, hub=HUB, length=120), [0.9, 0.9, 0.8, 0.9])
+    inst = with_blades(three, [make_blade_mask(H, W, 282, 12, hub=HUB, length=120)], [0.25])
+    assert len(pitch_from_instances(inst, expected_blades=None)) == 3  # default rotor: 3
+    res = pitch_from_instances(inst, expected_blades=4)
+    assert len(res) == 4 and res.admitted[0].score == 0.25
+    res = pitch_from_instances(inst, expected_blades=None, rotor_blades=4)
+    assert len(res) == 4
+
+
+def test_the_counted_blades_must_be_spaced_like_the_rotor():
+    """Blades 90 deg apart are not two of three: no slot is free for a candidate."""
+    two = scored(rotor(H, W, [20, 110], 12, hub=HUB, length=120), [0.9, 0.8, 0.95])
+    inst = with_blades(two, [make_blade_mask(H, W, 245, 12, hub=HUB, length=120)], [0.4])
+    assert not pitch_from_instances(inst, expected_blades=None).admitted
+
+
+def test_cli_records_admitted_blades_and_reads_version_1(cli, tmp_path):
+    inst = two_and_candidate(255)
+    path = write_instances(tmp_path / "instances.json",
+                           [{"id": 1, "file_name": "r.png", "width": W, "height": H}], [inst])
+    r = cli("pitch", path, "--score-threshold", "0.5", "--out", tmp_path / "p.json")
+    assert r.exit_code == 0, r.stderr
+    assert "blade 3 (score 0.30) admitted below the score threshold 0.5" in r.stderr
+    doc = json.loads((tmp_path / "p.json").read_text())
+    assert doc["schema_version"] == 2 and doc["score_threshold"] == 0.5
+    img, = doc["images"]
+    assert [b["admitted_low_score"] for b in img["blades"]] == [False, False, True]
+    assert img["score_threshold"] == 0.5 and img["candidate_floor"] == 0.2
+    (res, _, _), = read_pitch(tmp_path / "p.json")
+    assert [b.admitted_low_score for b in res.blades] == [False, False, True]
+    # A file's instances all count unless --score-threshold is given (as before).
+    r = cli("pitch", path, "--json")
+    assert r.exit_code == 0 and "admitted" not in r.stderr
+    assert not any(b["admitted_low_score"] for b in json.loads(r.stdout)["images"][0]["blades"])
+    # Completion off: the candidate floor at the threshold.
+    r = cli("pitch", path, "--score-threshold", "0.5", "--candidate-floor", "0.5")
+    assert r.exit_code == 5 and "found 2 blades" in r.stderr
+    # A version 1 file (no flags, no thresholds) still loads.
+    for b in img["blades"]:
+        del b["admitted_low_score"]
+    del img["score_threshold"], img["candidate_floor"]
+    doc.update(schema_version=1, images=[img])
+    del doc["score_threshold"], doc["candidate_floor"]
+    (tmp_path / "v1.json").write_text(json.dumps(doc))
+    (res, _, _), = read_pitch(tmp_path / "v1.json")
+    assert len(res) == 3 and not res.admitted and res.score_threshold is None
+
+
+def test_a_candidate_mostly_inside_a_counted_blade_is_not_admitted():
+    from wtcli.pitch import admit_low_score_blades
+
+    inst = two_and_candidate(255)
+    fat = make_blade_mask(H, W, 255, 30, hub=HUB, length=130, taper=1.0)
+    cs = find_contours(with_blades(inst, [fat], [0.9]), 20)
+    res = pitch_from_instances(inst, expected_blades=None)
+    measured = [b for b in res.blades if not b.admitted_low_score]
+    blades, cand, fat_c = list(cs.instances[:2]), cs.instances[3], cs.instances[4]
+    hub = np.asarray(res.hub_px)
+    assert [c for c, _ in admit_low_score_blades([cand], blades, measured, hub, 3)] == [cand]
+    assert admit_low_score_blades([cand], blades + [fat_c], measured, hub, 3) == []

@@ -364,3 +364,27 @@ def test_duplicate_blade_inside_a_better_one_is_dropped():
     assert hi.scores.tolist() == [s for s in out.scores.tolist() if s >= 0.75]
     # A blade less than the threshold inside another stays.
     assert len(infer.drop_duplicate_blades(inst, inside=0.8)) == 4
+
+
+def test_segment_image_keeps_low_score_blades_as_completion_candidates(monkeypatch):
+    """segment_image returns what scores >= the threshold plus blades down to the candidate
+    floor (for pitch's rotor completion); low-score towers and nacelles are not kept."""
+    h, w = 40, 50
+    masks = np.zeros((5, h, w), bool)
+    for i in range(5):
+        masks[i, 5 * i:5 * i + 4, 5:30] = True
+    every = Instances(np.array(["blade", "blade", "tower", "blade", "nacelle"], object), masks,
+                      np.array([0.9, 0.3, 0.3, 0.1, 0.6]))
+    asked = []
+
+    def fake_predict(model, image, score_threshold=0.5, max_size=None):
+        asked.append(score_threshold)
+        return every[every.scores >= score_threshold]
+
+    monkeypatch.setattr(infer, "predict", fake_predict)
+    img = np.zeros((h, w, 3), np.uint8)
+    inst = infer.segment_image(img, model=object())
+    assert asked == [0.2] and list(inst.scores) == [0.9, 0.3, 0.6]
+    assert list(inst.labels) == ["blade", "blade", "nacelle"]
+    plain = infer.segment_image(img, model=object(), candidate_floor=None)
+    assert asked[-1] == 0.5 and list(plain.scores) == [0.9, 0.6]

@@ -22,6 +22,12 @@ classified, so the class in a file always agrees with the θ next to it.
 The hub: the nacelle/hub instance's pixels near the blades' convergence point if there is a
 nacelle, else the convergence point (least-squares intersection of the blade axes), else the
 blades' common end, else (one blade alone) the blade's wider end (blades taper to the tip).
+
+Rotor completion: with a ``score_threshold``, blades scoring below it are not counted; when the
+confident blades of the main rotor are fewer than the rotor's blade count, a low-score blade
+detection (score >= ``candidate_floor``) that fits the rotor — its axis through the hub, its root
+at the hub, its direction in the free slot of the evenly spaced rotor, not inside another
+blade — is admitted and flagged ``admitted_low_score`` (``admit_low_score_blades``).
 """
 
 from __future__ import annotations
@@ -42,7 +48,7 @@ from wtcli.jsonio import document, read_json
 from wtcli.masks import Instances, read_instances
 
 PITCH_SCHEMA = "wtinspect.pitch"
-PITCH_VERSION = 1
+PITCH_VERSION = 2  # 2: admitted_low_score per blade, score_threshold and candidate_floor
 HORIZONTAL, ACUTE, VERTICAL = "horizontal", "acute", "vertical"
 CLASSES = (HORIZONTAL, ACUTE, VERTICAL)
 CLASS_INTERVALS = {HORIZONTAL: "[0, 30] U [150, 180)", ACUTE: "(30, 60] U [120, 150)",
@@ -51,6 +57,12 @@ ANGLE_DIGITS = 6
 THETA_SOURCE = "principal_axis"
 STUB_ELONGATION = 3.0  # below this a blade region has no reliable axis of its own
 PHOTO_SUFFIXES = (".jpg", ".jpeg", ".webp")
+# Rotor completion (docs/pitch.md). The threshold is segment's default (wtcli.segment.infer).
+DEFAULT_SCORE_THRESHOLD = 0.5
+CANDIDATE_FLOOR = 0.2  # lowest score a blade may be admitted at (seeds 9 500 000+, see docs)
+SLOT_TOLERANCE_DEG = 25.0  # as plan's MAX_SPACING_ERROR_DEG: the rotor's gaps within this of even
+CANDIDATE_INSIDE = 0.3  # a candidate this much inside a counted blade is that blade again
+DEFAULT_ROTOR_BLADES = 3
 
 
 # ---- angles and classes ------------------------------------------------------------------------
@@ -354,6 +366,7 @@ class BladePitch:
     centroid_px: tuple[float, float]
     elongation: float
     theta_method: str = "principal_axis"  # or hub_to_centroid for a stub (elongation < 3)
+    admitted_low_score: bool = False  # scored below the threshold, admitted to complete the rotor
 
     def __post_init__(self) -> None:
         if self.theta_method not in ("principal_axis", "hub_to_centroid"):
@@ -378,7 +391,7 @@ class BladePitch:
                          "angle_deg": r.angle_deg, "top": list(r.top), "bottom": list(r.bottom)},
                 "root_px": list(self.root_px), "tip_px": list(self.tip_px),
                 "centroid_px": list(self.centroid_px), "elongation": self.elongation,
-                "theta_method": self.theta_method}
+                "theta_method": self.theta_method, "admitted_low_score": self.admitted_low_score}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> BladePitch:
@@ -389,7 +402,8 @@ class BladePitch:
                    float(d["theta_deg"]), str(d["theta_class"]), float(d["theta_eq7_deg"]),
                    float(d["phi_deg"]), rect, tuple(d["root_px"]), tuple(d["tip_px"]),
                    tuple(d["centroid_px"]), float(d["elongation"]),
-                   str(d.get("theta_method", "principal_axis")))
+                   str(d.get("theta_method", "principal_axis")),
+                   bool(d.get("admitted_low_score", False)))  # absent in version 1
 
 
 @dataclass(frozen=True)
@@ -404,6 +418,8 @@ class PitchResult:
     axes_convergence_px: tuple[float, float] | None = None
     other_rotor_blades: tuple[int, ...] = ()  # source indices of blades of other turbines
     contours: ContourSet | None = field(default=None, repr=False, compare=False)
+    score_threshold: float | None = None  # blades below it were not counted (None: all were)
+    candidate_floor: float | None = None  # ... unless admitted from at least this score
 
     def __post_init__(self) -> None:
         if not self.blades:
@@ -428,6 +444,11 @@ class PitchResult:
     def classes(self) -> list[str]:
         return [b.theta_class for b in self.blades]
 
+    @property
+    def admitted(self) -> tuple[BladePitch, ...]:
+        """The blades admitted below the score threshold to complete the rotor."""
+        return tuple(b for b in self.blades if b.admitted_low_score)
+
     def to_dict(self) -> dict[str, Any]:
         return {"image": self.image, "image_size": list(self.image_size),
                 "area_threshold": self.area_threshold, "n_blades": len(self.blades),
@@ -435,6 +456,7 @@ class PitchResult:
                 "axes_convergence_px": (None if self.axes_convergence_px is None
                                         else list(self.axes_convergence_px)),
                 "other_rotor_blades": list(self.other_rotor_blades),
+                "score_threshold": self.score_threshold, "candidate_floor": self.candidate_floor,
                 "blades": [b.to_dict() for b in self.blades]}
 
     @classmethod
@@ -444,7 +466,12 @@ class PitchResult:
                    d["hub_source"], tuple(d["image_size"]), d.get("image") or {}, source,
                    float(d.get("area_threshold", DEFAULT_AREA_THRESHOLD)),
                    None if conv is None else tuple(conv),
-                   tuple(int(i) for i in d.get("other_rotor_blades", ())))
+                   tuple(int(i) for i in d.get("other_rotor_blades", ())), None,
+                   _opt_float(d.get("score_threshold")), _opt_float(d.get("candidate_floor")))
+
+
+def _opt_float(v: Any) -> float | None:
+    return None if v is None else float(v)
 
 
 # ---- measuring -----------------------------------------------------------------------------------
@@ -457,13 +484,28 @@ def check_blade_count(n: int, expected: int | None, where: str, dropped: int = 0
                               f"{expected} (--blades 0 accepts any count)")
 
 
-def measure_pitch(contours: ContourSet, expected_blades: int | None = 3) -> PitchResult:
+def measure_pitch(contours: ContourSet, expected_blades: int | None = 3,
+                  score_threshold: float | None = None, candidate_floor: float | None = CANDIDATE_FLOOR,
+                  rotor_blades: int | None = None) -> PitchResult:
     """θ (eq. 7 and principal axis), class and φ of every blade in one image's contours.
 
     ``expected_blades``: raise PerceptionError unless exactly this many blades are found
-    (None or 0: any count >= 1)."""
+    (None or 0: any count >= 1).
+
+    ``score_threshold``: instances scoring below it are not counted (None: every instance is).
+    Blades among them scoring at least ``candidate_floor`` (None: none) are candidates: when
+    the main rotor's counted blades are fewer than its blade count (``rotor_blades``, else
+    ``expected_blades``, else 3), ``admit_low_score_blades`` may admit them; they are flagged
+    ``admitted_low_score``."""
     if expected_blades is not None and expected_blades < 0:
         raise ValueError(f"expected_blades must be >= 0, got {expected_blades}")
+    candidates: list[InstanceContours] = []
+    full = contours
+    if score_threshold is not None:
+        if candidate_floor is not None:
+            candidates = [i for i in contours if i.label == "blade"
+                          and candidate_floor <= i.score < score_threshold]
+        contours = contours[contours.scores >= score_threshold] if len(contours) else contours
     all_blades = contours.of("blade")
     check_blade_count(len(all_blades), None, contours.name, contours.dropped)
     all_axes = [principal_axis(b) for b in all_blades]
@@ -474,10 +516,7 @@ def measure_pitch(contours: ContourSet, expected_blades: int | None = 3) -> Pitc
     blades = all_blades[keep]
     others = tuple(all_blades.instances[i].source_index for i in range(len(all_blades))
                    if i not in keep)
-    where = contours.name + (f" (besides {len(others)} blade(s) of other rotors)" if others else "")
-    check_blade_count(len(blades), expected_blades, where, contours.dropped)
     axes = [all_axes[i] for i in keep]
-    rects = [rect_eq7(b.points) for b in blades]
     lengths = [ax.t_max - ax.t_min for ax in axes]
 
     conv = axes_convergence(axes, lengths)
@@ -499,43 +538,142 @@ def measure_pitch(contours: ContourSet, expected_blades: int | None = 3) -> Pitc
     else:
         hub, source = wider_end(blades.instances[0], axes[0]), "blade_taper"
 
-    out = []
-    for inst, rect, ax in zip(blades, rects, axes):
-        to_centroid = np.asarray(ax.centroid) - hub
-        if ax.elongation < STUB_ELONGATION and np.linalg.norm(to_centroid) > 2.0:
-            # A stub (cut by the frame) has no axis of its own: hub -> its centroid instead.
-            method = "hub_to_centroid"
-            u = to_centroid / np.linalg.norm(to_centroid)
-            region = inst.fill()
-            x0, y0, _, _ = inst.bbox
-            ys, xs = np.nonzero(region)
-            t = (xs + x0 - hub[0]) * u[0] + (ys + y0 - hub[1]) * u[1]
-            root, tip = hub + max(float(t.min()), 0.0) * u, hub + float(t.max()) * u
-            phi = image_angle(u[0], u[1])
-            theta = normalize_theta(phi)
-        else:
-            method = "principal_axis"
-            a, b = ax.point(ax.t_min), ax.point(ax.t_max)
-            root, tip = (a, b) if np.linalg.norm(a - hub) <= np.linalg.norm(b - hub) else (b, a)
-            # φ follows the principal axis; the hub decides which way along it the tip lies.
-            theta = ax.theta_deg
-            phi = theta if (tip - root) @ ax.direction > 0 else theta + 180.0
-        out.append(BladePitch(
-            inst.source_index, inst.score, inst.area, theta, classify_theta(theta),
-            rect.angle_deg, normalize_phi(phi), rect, (float(root[0]), float(root[1])),
-            (float(tip[0]), float(tip[1])), ax.centroid, ax.elongation, method))
+    out = [_blade_pitch(inst, ax, hub) for inst, ax in zip(blades, axes)]
+    n_rotor = rotor_blades or expected_blades or DEFAULT_ROTOR_BLADES
+    if candidates and len(out) < n_rotor and source != "blade_taper":
+        admitted = admit_low_score_blades(candidates, list(blades), out, hub, n_rotor,
+                                          contours.image_size)
+        out = sorted(out + [_blade_pitch(c, ax, hub, admitted=True) for c, ax in admitted],
+                     key=lambda b: b.source_index)
+    where = contours.name + (f" (besides {len(others)} blade(s) of other rotors)" if others else "")
+    check_blade_count(len(out), expected_blades, where, contours.dropped)
+    shown = {b.source_index for b in out if b.admitted_low_score}
+    if score_threshold is not None:  # the overlay draws the instances counted and admitted
+        full = full[[i.score >= score_threshold or i.source_index in shown for i in full]] \
+            if len(full) else full
     return PitchResult(tuple(out), (float(hub[0]), float(hub[1])), source, contours.image_size,
                        contours.image, contours.source, contours.area_threshold,
                        None if conv is None else (float(conv[0]), float(conv[1])), others,
-                       contours)
+                       full, score_threshold, candidate_floor if score_threshold is not None else None)
+
+
+def _blade_pitch(inst: InstanceContours, ax: Axis, hub: np.ndarray,
+                 admitted: bool = False) -> BladePitch:
+    """θ, class, φ, root and tip of one blade of the rotor whose hub is ``hub``."""
+    rect = rect_eq7(inst.points)
+    to_centroid = np.asarray(ax.centroid) - hub
+    if ax.elongation < STUB_ELONGATION and np.linalg.norm(to_centroid) > 2.0:
+        # A stub (cut by the frame) has no axis of its own: hub -> its centroid instead.
+        method = "hub_to_centroid"
+        u = to_centroid / np.linalg.norm(to_centroid)
+        region = inst.fill()
+        x0, y0, _, _ = inst.bbox
+        ys, xs = np.nonzero(region)
+        t = (xs + x0 - hub[0]) * u[0] + (ys + y0 - hub[1]) * u[1]
+        root, tip = hub + max(float(t.min()), 0.0) * u, hub + float(t.max()) * u
+        phi = image_angle(u[0], u[1])
+        theta = normalize_theta(phi)
+    else:
+        method = "principal_axis"
+        a, b = ax.point(ax.t_min), ax.point(ax.t_max)
+        root, tip = (a, b) if np.linalg.norm(a - hub) <= np.linalg.norm(b - hub) else (b, a)
+        # φ follows the principal axis; the hub decides which way along it the tip lies.
+        theta = ax.theta_deg
+        phi = theta if (tip - root) @ ax.direction > 0 else theta + 180.0
+    return BladePitch(
+        inst.source_index, inst.score, inst.area, theta, classify_theta(theta),
+        rect.angle_deg, normalize_phi(phi), rect, (float(root[0]), float(root[1])),
+        (float(tip[0]), float(tip[1])), ax.centroid, ax.elongation, method, admitted)
+
+
+# ---- rotor completion ------------------------------------------------------------------------------
+def _angle_diff(a: float, b: float) -> float:
+    """Signed a - b on the circle, in [-180, 180)."""
+    return (a - b + 180.0) % 360.0 - 180.0
+
+
+def _overlap(a: InstanceContours, b: InstanceContours) -> int:
+    """Pixels the filled regions of ``a`` and ``b`` share (drawn in ``a``'s box only)."""
+    x0, y0, x1, y1 = a.bbox
+    bx0, by0, bx1, by1 = b.bbox
+    if bx0 >= x1 or bx1 <= x0 or by0 >= y1 or by1 <= y0:
+        return 0
+    canvas = np.zeros((y1 - y0, x1 - x0), np.uint8)
+    cv2.drawContours(canvas, [(c - [x0, y0]).reshape(-1, 1, 2).astype(np.int32)
+                              for c in b.contours], -1, 1, thickness=cv2.FILLED)
+    return int((a.fill() & canvas.astype(bool)).sum())
+
+
+def admit_low_score_blades(candidates: list[InstanceContours], blades: list[InstanceContours],
+                           measured: list[BladePitch], hub: np.ndarray, n: int,
+                           image_size: tuple[int, int] | None = None,
+                           slot_tolerance: float = SLOT_TOLERANCE_DEG,
+                           inside: float = CANDIDATE_INSIDE,
+                           min_reach: float = 0.25) -> list[tuple[InstanceContours, Axis]]:
+    """Low-score blade detections that complete an ``n``-blade rotor of which ``measured``
+    (the counted ``blades``, hub ``hub``) are fewer than ``n``; best score first, at most the
+    number missing. The measured blades fix the rotor's phase (circular mean of n x φ) and
+    must sit in distinct slots with gaps within ``slot_tolerance`` of even. A candidate is
+    admitted when its axis passes through the hub near one of its ends (``_supports``, as for
+    the rotor's own blades), its direction hub -> far end lies within ``slot_tolerance`` of a
+    free slot, it reaches at least a quarter of the blades' median length beyond the hub, and
+    less than ``inside`` of its pixels lie in a counted or already admitted blade."""
+    missing = n - len(measured)
+    if missing <= 0 or not candidates or not measured or n < 2:
+        return []
+    step = 360.0 / n
+    phis = np.array([b.phi_deg for b in measured])
+    ang = np.radians(phis * n)
+    phase = math.degrees(math.atan2(np.sin(ang).sum(), np.cos(ang).sum())) / n
+    slot = np.round((phis - phase) / step).astype(int) % n
+    off = np.array([_angle_diff(p, phase + k * step) for p, k in zip(phis, slot)])
+    if len(set(slot.tolist())) != len(phis) or off.max() - off.min() > slot_tolerance:
+        return []  # the counted blades are not spaced like blades of an n-blade rotor
+    free = set(range(n)) - set(slot.tolist())
+    scale = float(np.median([math.dist(b.root_px, b.tip_px) for b in measured]))
+    taken = list(blades)
+    out: list[tuple[InstanceContours, Axis]] = []
+    for cand in sorted(candidates, key=lambda c: (-c.score, c.source_index)):
+        if len(out) == missing:
+            break
+        ax = principal_axis(cand)
+        length = max(ax.t_max - ax.t_min, 1.0)
+        if not _supports(ax, length, cand.area / length, hub):
+            continue
+        ends = (ax.point(ax.t_min), ax.point(ax.t_max))
+        far = max(ends, key=lambda e: float(np.linalg.norm(e - hub)))
+        if np.linalg.norm(far - hub) < min_reach * scale and not (
+                image_size is not None and _touches_border(cand, image_size)):
+            continue  # too short for a blade of this rotor, unless the frame cut it
+        phi = image_angle(*(far - hub))
+        k = min(free, key=lambda j: abs(_angle_diff(phi, phase + j * step)), default=None)
+        if k is None or abs(_angle_diff(phi, phase + k * step)) > slot_tolerance:
+            continue
+        if any(_overlap(cand, t) >= inside * cand.area for t in taken):
+            continue
+        free.discard(k)
+        taken.append(cand)
+        out.append((cand, ax))
+    return out
 
 
 def pitch_from_instances(instances: Instances, area_threshold: float = DEFAULT_AREA_THRESHOLD,
                          expected_blades: int | None = 3, image: dict | None = None,
-                         source: str = "") -> PitchResult:
-    """Eq. 4-7 in one call: instances of one image -> contours -> pitch."""
+                         source: str = "", score_threshold: float | None = DEFAULT_SCORE_THRESHOLD,
+                         candidate_floor: float | None = CANDIDATE_FLOOR,
+                         rotor_blades: int | None = None) -> PitchResult:
+    """Eq. 4-7 in one call: instances of one image -> contours -> pitch. Instances scoring
+    below ``score_threshold`` (default 0.5, segment's) are not counted, but blades among them
+    scoring at least ``candidate_floor`` may complete the rotor (``measure_pitch``); pass
+    ``segment_image``'s output as it is (it keeps such blades)."""
+    if score_threshold is not None and candidate_floor is not None and len(instances):
+        low = (instances.scores < score_threshold) & ~(
+            (instances.labels == "blade") & (instances.scores >= candidate_floor))
+        if low.any():  # not needed at all: no contours for them (indices kept below)
+            instances = Instances(instances.labels, instances.masks & ~low[:, None, None],
+                                  instances.scores, instances.boxes)
     cs = require_contours(find_contours(instances, area_threshold, image=image, source=source))
-    return measure_pitch(cs, expected_blades)
+    return measure_pitch(cs, expected_blades, score_threshold, candidate_floor, rotor_blades)
 
 
 # ---- inputs of the pitch command -------------------------------------------------------------------
@@ -548,6 +686,7 @@ class PitchInput:
     error: str | None
     image: dict
     background_candidates: tuple[Path, ...] = ()
+    score_threshold: float | None = None  # a photo segmented here: 0.5; a file: none (all count)
 
 
 def _image_candidates(file_name: str | None, *dirs: Path) -> tuple[Path, ...]:
@@ -561,9 +700,11 @@ def _image_candidates(file_name: str | None, *dirs: Path) -> tuple[Path, ...]:
     return tuple(out)
 
 
-def load_pitch_input(paths: list[Path], area_threshold: float | None = None) -> list[PitchInput]:
+def load_pitch_input(paths: list[Path], area_threshold: float | None = None,
+                     candidate_floor: float | None = CANDIDATE_FLOOR) -> list[PitchInput]:
     """INPUT of ``pitch``, dispatched on its type: a contours JSON, an instances JSON (contours
-    found here), or mask PNG(s) of one image. A photo is refused for now (segment it first)."""
+    found here), mask PNG(s) of one image, or photos (segmented here, keeping blades down to
+    ``candidate_floor`` as rotor-completion candidates)."""
     paths = [Path(p) for p in paths]
     if not paths:
         raise InputError("no input given")
@@ -588,7 +729,8 @@ def load_pitch_input(paths: list[Path], area_threshold: float | None = None) -> 
         return out
     photos = [p for p in paths if is_photo(p)]
     if photos:
-        return [photo_input(p, thr) for p in photos] if len(photos) == len(paths) else \
+        return [photo_input(p, thr, candidate_floor) for p in photos] \
+            if len(photos) == len(paths) else \
             _mixed(photos[0])
     if all(p.suffix.lower() in MASK_SUFFIXES for p in paths):
         rec, inst = instances_from_mask_files(paths)
@@ -614,17 +756,21 @@ def is_photo(path: Path) -> bool:
     return False
 
 
-def photo_input(path: Path, area_threshold: float) -> PitchInput:
-    """One photo as pitch input: segmented with the shipped model (``wtcli.segment``), then
-    ``find_contours`` as for an instances JSON; the photo is the overlay's background."""
+def photo_input(path: Path, area_threshold: float,
+                candidate_floor: float | None = CANDIDATE_FLOOR) -> PitchInput:
+    """One photo as pitch input: segmented with the shipped model (``wtcli.segment``) at its
+    default score threshold, with the blades scoring at least ``candidate_floor`` kept as
+    rotor-completion candidates, then ``find_contours`` as for an instances JSON; the photo is
+    the overlay's background."""
     from wtcli.segment.infer import segment_photo
 
-    rec, inst = segment_photo(path)
+    rec, inst = segment_photo(path, score_threshold=DEFAULT_SCORE_THRESHOLD,
+                              candidate_floor=candidate_floor)
     try:
         cs = require_contours(find_contours(inst, area_threshold, image=rec, source=str(path)))
-        return PitchInput(cs, None, rec, (path,))
+        return PitchInput(cs, None, rec, (path,), DEFAULT_SCORE_THRESHOLD)
     except PerceptionError as e:
-        return PitchInput(None, str(e), rec, (path,))
+        return PitchInput(None, str(e), rec, (path,), DEFAULT_SCORE_THRESHOLD)
 
 
 def _mixed(photo: Path) -> list[PitchInput]:
@@ -675,6 +821,8 @@ class PitchBatch:
     inputs: tuple[PitchInput, ...]
     source: str
     expected_blades: int | None
+    score_threshold: float | None = None  # as given; each image records the one it used
+    candidate_floor: float | None = CANDIDATE_FLOOR
 
     @property
     def n_failed(self) -> int:
@@ -690,6 +838,7 @@ class PitchBatch:
             items.append(item)
         return document(PITCH_SCHEMA, PITCH_VERSION, {
             "source": self.source, "expected_blades": self.expected_blades or 0,
+            "score_threshold": self.score_threshold, "candidate_floor": self.candidate_floor,
             "theta_source": THETA_SOURCE, "angle_convention":
                 "degrees, counter-clockwise, image y up, 0 = right; theta in [0, 180), "
                 "phi hub->tip in [0, 360)",
@@ -697,10 +846,12 @@ class PitchBatch:
 
 
 def pitch_batch(inputs: list[PitchInput], expected_blades: int | None = 3,
-                source: str = "", on_done: Callable[[int, str | None], None] | None = None
-                ) -> PitchBatch:
+                source: str = "", on_done: Callable[[int, str | None], None] | None = None,
+                score_threshold: float | None = None,
+                candidate_floor: float | None = CANDIDATE_FLOOR) -> PitchBatch:
     """``measure_pitch`` on every input image; per-image errors are recorded, not raised.
-    ``on_done(index, error)`` is called after each image (for a progress bar)."""
+    ``on_done(index, error)`` is called after each image (for a progress bar).
+    ``score_threshold``: None uses each input's own (0.5 for a photo, none for a file)."""
     results, errors = [], []
     for k, inp in enumerate(inputs):
         if inp.contours is None:
@@ -708,18 +859,21 @@ def pitch_batch(inputs: list[PitchInput], expected_blades: int | None = 3,
             errors.append(inp.error or "no contours")
         else:
             try:
-                results.append(measure_pitch(inp.contours, expected_blades))
+                thr = inp.score_threshold if score_threshold is None else score_threshold
+                results.append(measure_pitch(inp.contours, expected_blades, thr, candidate_floor))
                 errors.append(None)
             except PerceptionError as e:
                 results.append(None)
                 errors.append(str(e))
         if on_done is not None:
             on_done(k, errors[-1])
-    return PitchBatch(tuple(results), tuple(errors), tuple(inputs), source, expected_blades)
+    return PitchBatch(tuple(results), tuple(errors), tuple(inputs), source, expected_blades,
+                      score_threshold, candidate_floor)
 
 
 def read_pitch(path: str | Path) -> list[tuple[PitchResult | None, str | None, dict]]:
-    """Read a ``wtinspect.pitch`` file: (result or None, error or None, image record) per image."""
+    """Read a ``wtinspect.pitch`` file, version 1 or 2 (version 1 has no admitted blades):
+    (result or None, error or None, image record) per image."""
     path = Path(path)
     doc = read_json(path, PITCH_SCHEMA, PITCH_VERSION)
     out = []
@@ -804,7 +958,9 @@ def draw_pitch_overlay(image_bgr: np.ndarray | None, result: PitchResult) -> np.
     step = int(24 * max(s, 0.7))
     for k, b in enumerate(result.blades):
         _text(img, f"#{k + 1}  theta {b.theta_deg:5.1f}  {b.theta_class:<10}  phi {b.phi_deg:5.1f}"
-                   f"  (eq. 7: {b.theta_eq7_deg:5.1f})", (8, step * (k + 1)), scale,
+                   f"  (eq. 7: {b.theta_eq7_deg:5.1f})"
+                   + (f"  admitted, score {b.score:.2f}" if b.admitted_low_score else ""),
+              (8, step * (k + 1)), scale,
               CLASS_COLORS_BGR[b.theta_class], thick)
     # Legend: the classes and the angle convention.
     step = int(24 * max(s, 0.7))

@@ -11,7 +11,8 @@ import typer
 from wtcli.console import err_console, make_progress
 from wtcli.errors import InputError, PartialFailure, PerceptionError
 from wtcli.jsonio import atomic_write_bytes, dumps, write_json
-from wtcli.pitch import (draw_pitch_overlay, load_pitch_input, overlay_background, pitch_batch)
+from wtcli.pitch import (CANDIDATE_FLOOR, draw_pitch_overlay, load_pitch_input, overlay_background,
+                         pitch_batch)
 
 
 def _overlay_name(img: dict, k: int) -> str:
@@ -31,6 +32,15 @@ def register(app: typer.Typer) -> None:
             help="Eq. 6 threshold in pixels (default 20; a contours JSON keeps its own)."),
         blades: int = typer.Option(3, "--blades", min=0,
                                    help="Expected blades per image; 0 accepts any count."),
+        score_threshold: Optional[float] = typer.Option(
+            None, "--score-threshold", min=0.0, max=1.0,
+            help="Count only instances scoring at least this; lower-scoring blades may complete "
+                 "a rotor that is short of blades. Default: 0.5 for a photo, none for a file "
+                 "(every instance in it counts)."),
+        candidate_floor: float = typer.Option(
+            CANDIDATE_FLOOR, "--candidate-floor", min=0.0, max=1.0,
+            help="Lowest score at which a blade may be admitted to complete the rotor; at or "
+                 "above --score-threshold none is."),
         out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write the pitch JSON here."),
         overlay_dir: Optional[Path] = typer.Option(
             None, "--overlay-dir", help="Write one PNG per image with each blade's axis, θ, "
@@ -41,7 +51,7 @@ def register(app: typer.Typer) -> None:
         json_out: bool = typer.Option(False, "--json", help="Print the pitch JSON on stdout."),
     ) -> None:
         """Measure each blade's angle θ, its class and its direction φ hub -> tip (eq. 7)."""
-        loaded = load_pitch_input(inputs, area_threshold)
+        loaded = load_pitch_input(inputs, area_threshold, candidate_floor)
         if image is not None and len(loaded) != 1:
             raise InputError(f"--image needs an input with one image, got {len(loaded)}")
         if len(loaded) > 1 and err_console.is_terminal:
@@ -49,9 +59,20 @@ def register(app: typer.Typer) -> None:
                 task = progress.add_task("pitch", total=len(loaded), status="")
                 batch = pitch_batch(loaded, blades or None, source=str(inputs[0]),
                                     on_done=lambda k, err: progress.update(
-                                        task, advance=1, status="" if err is None else "failed"))
+                                        task, advance=1, status="" if err is None else "failed"),
+                                    score_threshold=score_threshold,
+                                    candidate_floor=candidate_floor)
         else:
-            batch = pitch_batch(loaded, blades or None, source=str(inputs[0]))
+            batch = pitch_batch(loaded, blades or None, source=str(inputs[0]),
+                                score_threshold=score_threshold, candidate_floor=candidate_floor)
+        for res, inp in zip(batch.results, batch.inputs):
+            if res is not None and res.admitted:
+                name = inp.image.get("file_name") or inp.image.get("id", "?")
+                which = ", ".join(f"blade {res.blades.index(b) + 1} (score {b.score:.2f})"
+                                  for b in res.admitted)
+                err_console.print(f"note: {name}: {which} admitted below the score threshold "
+                                  f"{res.score_threshold:g} to complete the {len(res.blades)}-blade "
+                                  "rotor", soft_wrap=True)
         overlays: list[Optional[str]] | None = None
         if overlay_dir is not None:
             overlays = []
@@ -80,7 +101,8 @@ def register(app: typer.Typer) -> None:
                 for k, b in enumerate(res.blades):
                     typer.echo(f"{name}: blade {k + 1}: theta {b.theta_deg:7.2f}  "
                                f"{b.theta_class:<10}  phi {b.phi_deg:7.2f}  "
-                               f"(eq. 7 minAreaRect {b.theta_eq7_deg:.2f})")
+                               f"(eq. 7 minAreaRect {b.theta_eq7_deg:.2f})"
+                               + ("  admitted at low score" if b.admitted_low_score else ""))
         n, bad = len(batch.results), batch.n_failed
         if out is not None or overlay_dir is not None:
             where = ", ".join(str(p) for p in (out, overlay_dir) if p is not None)

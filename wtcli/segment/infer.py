@@ -18,6 +18,7 @@ import torch
 
 from wtcli.errors import InputError
 from wtcli.masks import LABELS, Instances
+from wtcli.pitch import CANDIDATE_FLOOR
 from wtcli.segment.data import image_tensor
 from wtcli.segment.model import build_model, load_weights, pick_device, resolve_weights, set_infer_size
 
@@ -173,12 +174,24 @@ def paste_mask(out: np.ndarray, soft: np.ndarray, box, sx: float, sy: float,
 
 def segment_image(image_bgr: np.ndarray, model: torch.nn.Module | None = None,
                   score_threshold: float = DEFAULT_SCORE_THRESHOLD, max_size: int | None = DEFAULT_MAX_SIZE,
-                  device: str | None = None, weights: str | Path | None = None) -> Instances:
+                  device: str | None = None, weights: str | Path | None = None,
+                  candidate_floor: float | None = CANDIDATE_FLOOR) -> Instances:
     """The one call other stages use: segment a BGR photo with the shipped model (loaded lazily
-    and cached) or the ``model`` given."""
+    and cached) or the ``model`` given.
+
+    Returns the instances scoring at least ``score_threshold`` AND the blades scoring at least
+    ``candidate_floor`` (default 0.2; None: none): those are rotor-completion candidates for
+    ``wtcli.pitch.pitch_from_instances``, which counts only what scores ``score_threshold``
+    (give it the same one). ``inst[inst.scores >= score_threshold]`` is the segmentation alone;
+    it is the same as predicting at that threshold (duplicates are dropped greedily by score)."""
     if model is None:
         model = load_model(weights, device)
-    return predict(model, image_bgr, score_threshold, max_size)
+    if candidate_floor is None or candidate_floor >= score_threshold:
+        return predict(model, image_bgr, score_threshold, max_size)
+    inst = predict(model, image_bgr, candidate_floor, max_size)
+    if not len(inst):
+        return inst
+    return inst[(inst.scores >= score_threshold) | (inst.labels == "blade")]
 
 
 def remove_background(image_bgr: np.ndarray, inst: Instances) -> np.ndarray:
