@@ -725,3 +725,42 @@ def test_site_ground_z_is_the_nearest_base_as_by_comparing_all(layout):
     d = np.linalg.norm(P[:, None, :2] - site.ground_points[None, :, :2], axis=2)
     want = site.ground_points[np.argmin(d, axis=1), 2]
     assert np.array_equal(site.ground_z(P), want)
+
+
+# ---- legs over uneven ground ----------------------------------------------------------------------
+def _hilly_site():
+    """Three turbines in a row, the middle one's base 40 m higher: a straight leg between the
+    low ones, or back to the launch point, runs into the high base's ground."""
+    return tuple(make_turbine(az=30.0 * i, tid=f"T{i + 1}", base=(400.0 * i, 0.0, 40.0 * (i == 1)))
+                 for i in range(3))
+
+
+def test_legs_above_ground_sees_a_leg_cross_higher_ground():
+    from wtcli.plan.safety import Site
+
+    site = Site(_hilly_site(), launch=np.array([-150.0, 0.0, 0.0]))
+    p0 = np.array([[0.0, 30.0, 6.0], [0.0, 30.0, 50.0], [0.0, 30.0, 6.0]])
+    p1 = np.array([[800.0, 30.0, 6.0], [800.0, 30.0, 50.0], [150.0, 30.0, 6.0]])
+    assert site.legs_above_ground(p0, p1, 5.0).tolist() == [False, True, True]
+    flat = Site(tuple(make_turbine(tid=f"T{i}", base=(400.0 * i, 0, 0)) for i in range(3)))
+    assert flat.legs_above_ground(p0, p1, 5.0).tolist() == [True, True, True]
+    assert not flat.legs_above_ground(p0[:1], p1[:1], 7.0)[0]  # the ends are too low
+
+
+def test_plan_over_uneven_ground_keeps_every_leg_above_it():
+    ts = _hilly_site()
+    launch = np.array([-150.0, 0.0, 0.0])
+    m = Mission(ts, CAM, fleet=Fleet(launch=tuple(launch)),
+                settings=Settings(inspect_tower=False, inspect_nacelle=False, min_side_coverage=0.0))
+    plan = plan_mission(m)
+    assert plan.summary["violations"]["ground_violations"] == 0
+    # Independently: the nearest base or launch point's height, every 0.5 m of every leg.
+    G = np.array([t.base for t in ts] + [launch], float)
+    for r in plan.routes:
+        at_launch = np.linalg.norm(r.pos[:, :2] - launch[:2], axis=1) < 0.5
+        for i in np.nonzero(~at_launch[:-1] & ~at_launch[1:])[0]:
+            n = int(np.ceil(np.linalg.norm(r.pos[i + 1] - r.pos[i]) / 0.5)) + 1
+            X = r.pos[i] + (r.pos[i + 1] - r.pos[i]) * np.linspace(0, 1, n)[:, None]
+            g = G[np.argmin(np.linalg.norm(X[:, None, :2] - G[None, :, :2], axis=2), axis=1), 2]
+            assert (X[:, 2] >= g + m.settings.min_altitude_m - 1e-6).all(), (r.uav, i, r.component[i + 1])
+    assert_safe(plan, m.settings.safe_distance_m)

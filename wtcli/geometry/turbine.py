@@ -237,39 +237,64 @@ class Turbine:
         (distance to an enclosing capsule / cylinder, itself a lower bound) is below ``cap``;
         elsewhere that bound stands in. Values below ``cap`` are then the same as without it."""
         P = np.atleast_2d(np.asarray(points, dtype=float))
-        cols = [self._capped(P, self._blade_bound(P, k), cap,
-                             lambda Q, k=k: self._blade_distance(Q, k))
-                for k in range(self.n_blades)]
-        cols += [self._capped(P, self._tower_bound(P), cap, self._tower_distance),
-                 self._nacelle_distance(P), self._hub_distance(P)]
-        return np.stack(cols, axis=1)
+        blades, local, bound = self._blade_bounds(P)
+        near = np.ones(bound.shape, bool) if cap is None else bound < cap
+        self._blade_exact(blades, local, near)
+        tower = self._tower_bound(P)
+        near_t = np.ones(len(P), bool) if cap is None else tower < cap
+        if near_t.any():
+            tower[near_t] = self._tower_distance(P[near_t])
+        return np.column_stack([blades, tower, self._nacelle_distance(P), self._hub_distance(P)])
 
     def clearance(self, points: np.ndarray, cap: float | None = None) -> np.ndarray:
-        """Distance (m) from each point to the nearest part of the turbine; (M,) for (M, 3)."""
-        return self.clearance_by_part(points, cap).min(axis=1)
+        """Distance (m) from each point to the nearest part of the turbine; (M,) for (M, 3).
 
-    @staticmethod
-    def _capped(P: np.ndarray, bound: np.ndarray | None, cap: float | None, exact) -> np.ndarray:
-        if cap is None or bound is None:
-            return exact(P)
-        out = bound.copy()
-        near = bound < cap
+        The same values as ``clearance_by_part(points, cap).min(axis=1)``, cheaper: a part's
+        exact distance is skipped where its bound is already at least the least exact distance
+        of the parts done before it (the hub and nacelle, exact and cheap, go first), since that
+        part cannot be the nearest."""
+        P = np.atleast_2d(np.asarray(points, dtype=float))
+        best = np.minimum(self._nacelle_distance(P), self._hub_distance(P))
+        limit = best if cap is None else np.minimum(best, cap)
+        blades, local, bound = self._blade_bounds(P)
+        self._blade_exact(blades, local, bound < limit[:, None])
+        best = np.minimum(best, blades.min(axis=1)) if blades.shape[1] else best
+        limit = best if cap is None else np.minimum(best, cap)
+        tower = self._tower_bound(P)
+        near = tower < limit
         if near.any():
-            out[near] = exact(P[near])
-        return out
+            tower[near] = self._tower_distance(P[near])
+        return np.minimum(best, tower)
 
-    def _blade_bound(self, P: np.ndarray, k: int) -> np.ndarray:
-        # Each section lies inside the circle of its chord semi-axis A(f), and the ellipse
-        # distance is at least (radius - A): with the taper factor, never above _blade_distance.
-        d = self.blade_direction(k)
-        q = P - self.hub_center
-        s = q @ d
+    def _blade_bounds(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(values, local, bound), each (M, n_blades) or (M, n_blades, 3): the blade bounds of
+        every point (``values`` starts as a copy, for ``_blade_exact`` to refine), and the points
+        in each blade's frame (span s, chord u, thickness v), all blades in one product.
+
+        Each section lies inside the circle of its chord semi-axis A(f), and the ellipse distance
+        is at least (radius - A): with the taper factor, never above the exact distance."""
+        F = self._cached("blade_frames", lambda: np.array(
+            [v for k in range(self.n_blades) for v in self.blade_frame(k)]).reshape(-1, 3))
+        local = ((P - self.hub_center) @ F.T).reshape(len(P), self.n_blades, 3)
+        s = local[..., 0]
         s0, s1 = self.blade_root_offset, self.tip_radius
-        r = q - s[:, None] * d
-        rho = np.sqrt((r * r).sum(axis=1))
+        rho = np.hypot(local[..., 1], local[..., 2])
         A = self._blade_chord((np.clip(s, s0, s1) - s0) / (s1 - s0)) / 2.0  # blade_semi_axes' A
         beyond = np.maximum(s - s1, 0.0) + np.maximum(s0 - s, 0.0)
-        return np.hypot(np.maximum(rho - A, 0.0) * self._blade_taper_cos(), beyond)
+        bound = np.hypot(np.maximum(rho - A, 0.0) * self._blade_taper_cos(), beyond)
+        return bound.copy(), local, bound
+
+    def _blade_exact(self, values: np.ndarray, local: np.ndarray, near: np.ndarray) -> None:
+        """Set ``values`` to the exact blade distance where ``near``: the section ellipse's
+        in-plane distance (times the taper factor) with the distance beyond the blade's ends."""
+        if not near.any():
+            return
+        s, u, v = local[near].T
+        s0, s1 = self.blade_root_offset, self.tip_radius
+        A, B = self.blade_semi_axes((np.clip(s, s0, s1) - s0) / (s1 - s0))
+        inplane = _ellipse_distance(u, v, A, B) * self._blade_taper_cos()
+        beyond = np.maximum(s - s1, 0.0) + np.maximum(s0 - s, 0.0)
+        values[near] = np.hypot(inplane, beyond)
 
     def _tower_bound(self, P: np.ndarray) -> np.ndarray:
         # The frustum lies inside the cylinder of its base radius.
@@ -359,18 +384,6 @@ class Turbine:
             cross = ab[0] * (X[:, 1] - a[1]) - ab[1] * (X[:, 0] - a[0])
             inside &= cross >= 0  # counter-clockwise polygon
         return np.where(inside, 0.0, d)
-
-    def _blade_distance(self, P: np.ndarray, k: int) -> np.ndarray:
-        d, c, n = self.blade_frame(k)
-        q = P - self.hub_center
-        s = q @ d
-        s0, s1 = self.blade_root_offset, self.tip_radius
-        f = (np.clip(s, s0, s1) - s0) / (s1 - s0)
-        A, B = self.blade_semi_axes(f)
-        u, v = q @ c, q @ n
-        inplane = _ellipse_distance(u, v, A, B) * self._blade_taper_cos()
-        beyond = np.maximum(s - s1, 0.0) + np.maximum(s0 - s, 0.0)
-        return np.hypot(inplane, beyond)
 
     # ---- surface samples -------------------------------------------------------------------
     def surface_samples(self, spacing: float = 0.5, parts: str = "all") -> SurfaceSamples:

@@ -138,9 +138,15 @@ def _leg_time(p: np.ndarray, q: np.ndarray, v: float, climb: float) -> float:
     return max(d / v, abs(float(q[2] - p[2])) / climb) if d > 0 else 0.0
 
 
+def _leg_times(P: np.ndarray, v: float | np.ndarray, climb: float) -> np.ndarray:
+    """``_leg_time`` of each leg P[i] -> P[i + 1] at speed v (one per leg, or one for all)."""
+    D = np.diff(P, axis=0)
+    d = np.linalg.norm(D, axis=1)
+    return np.where(d > 0, np.maximum(d / v, np.abs(D[:, 2]) / climb), 0.0)
+
+
 def chunk_time(ch: Chunk, v_slow: float, climb: float) -> float:
-    P = np.array([w.pos for w in ch.wps])
-    return sum(_leg_time(P[i], P[i + 1], v_slow, climb) for i in range(len(P) - 1))
+    return float(_leg_times(np.array([w.pos for w in ch.wps]).reshape(-1, 3), v_slow, climb).sum())
 
 
 # ---- ordering and splitting --------------------------------------------------------------------------
@@ -280,23 +286,21 @@ def _timed_route(uav: str, wps: list[WP], swaps: list[int], v_slow: float, v_fas
                  climb: float, swap_s: float) -> Route:
     n = len(wps)
     pos = np.array([w.pos for w in wps])
-    t = np.zeros(n)
-    speed = np.zeros(n)
-    yaw = np.zeros(n)
-    pitch = np.zeros(n)
-    fwd = wps[0].fwd
-    swap_set = set(swaps)
-    for i, w in enumerate(wps):
-        if w.fwd is not None:
-            fwd = w.fwd
-        yaw[i], pitch[i] = _yaw_pitch(fwd)
-        if i == 0:
-            continue
-        v = v_slow if w.slow else v_fast
-        dt = _leg_time(pos[i - 1], pos[i], v, climb)
-        L = float(np.linalg.norm(pos[i] - pos[i - 1]))
-        t[i] = t[i - 1] + dt + (swap_s if i in swap_set else 0.0)
-        speed[i] = L / dt if dt > 0 else 0.0
+    slow = np.array([w.slow for w in wps[1:]], bool)
+    dt = _leg_times(pos, np.where(slow, v_slow, v_fast), climb)
+    L = np.linalg.norm(np.diff(pos, axis=0), axis=1)
+    extra = np.zeros(n - 1)
+    extra[[i - 1 for i in swaps]] = swap_s
+    t = np.r_[0.0, np.cumsum(dt + extra)]
+    speed = np.r_[0.0, np.divide(L, dt, out=np.zeros(n - 1), where=dt > 0)]
+    # The camera keeps the last forward given (none: the one before).
+    have = np.array([w.fwd is not None for w in wps])
+    have[0] = True
+    fwds = np.array([w.fwd if w.fwd is not None else wps[0].fwd for w in wps])
+    F = fwds[np.maximum.accumulate(np.where(have, np.arange(n), 0))]
+    F = F / np.linalg.norm(F, axis=1)[:, None]
+    yaw = np.degrees(np.arctan2(F[:, 0], F[:, 1])) % 360.0
+    pitch = np.degrees(np.arcsin(np.clip(F[:, 2], -1.0, 1.0)))
     return Route(uav, t, pos, speed, yaw, pitch, np.array([w.photo for w in wps]),
                  np.array([w.component for w in wps], dtype=object),
                  summary={"battery_swaps": len(swaps), "sorties": len(swaps) + 1})
@@ -315,8 +319,12 @@ def check_routes(routes: list[Route], site: Site, launch: np.ndarray, safe: floa
         bad_w = np.nonzero(c < safe)[0]
         bad_l = np.nonzero(lb < safe)[0]
         at_launch = np.linalg.norm(r.pos[:, :2] - launch[:2], axis=1) < 0.5
-        low = (r.pos[:, 2] < site.ground_z(r.pos) + min_alt - 1e-6) & ~at_launch
-        bad_g = np.nonzero(low)[0]
+        low_wp = (r.pos[:, 2] < site.ground_z(r.pos) + min_alt - 1e-6) & ~at_launch
+        # Legs too, but not those the take-off and landing fly at the launch point.
+        free = np.nonzero(~at_launch[:-1] & ~at_launch[1:])[0]
+        low = low_wp.copy()
+        low[free[~site.legs_above_ground(r.pos[free], r.pos[free + 1], min_alt)] + 1] = True
+        bad_g = np.nonzero(low)[0]  # a leg is counted at the waypoint it ends at
         out["waypoint_violations"] += len(bad_w)
         out["leg_violations"] += len(bad_l)
         out["ground_violations"] += len(bad_g)
@@ -332,7 +340,8 @@ def check_routes(routes: list[Route], site: Site, launch: np.ndarray, safe: floa
                                           f"{lb[i]:.2f} m from a turbine part")
             elif len(bad_g):
                 i = int(bad_g[0])
-                out["first_violation"] = (f"{r.uav} waypoint {i} ({r.component[i]}) is below "
+                what = f"waypoint {i}" if low_wp[i] else f"leg {i - 1}->{i}"
+                out["first_violation"] = (f"{r.uav} {what} ({r.component[i]}) is below "
                                           f"{min_alt:g} m above the ground")
     return out
 

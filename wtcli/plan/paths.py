@@ -104,7 +104,8 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
     """
     p, q = np.asarray(p, float), np.asarray(q, float)
     cap = leg_required + 0.5 * LEG_STEP  # legs subtract up to half a step of sampling slack
-    if site.segment_clearance(p[None], q[None], LEG_STEP, cap)[0] >= leg_required:
+    if site.segment_clearance(p[None], q[None], LEG_STEP, cap)[0] >= leg_required and (
+            ground is None or site.legs_above_ground(p[None], q[None], ground)[0]):
         return []
     dirs = list(hints or [])
     m = 0.5 * (p + q)
@@ -148,8 +149,8 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
         # Via points must clear themselves (cheap) before their legs are checked.
         okv = np.ones(len(cands), bool)
         np.logical_and.at(okv, vo, site.clearance(vp, cap) >= leg_required)
-        cands = sorted((cands[i] for i in np.nonzero(okv)[0]),
-                       key=lambda c: _chain_length([p] + c + [q]))
+        keep = np.nonzero(okv)[0]
+        cands = [cands[i] for i in keep[np.argsort(_chain_lengths(p, q, vp, vo)[keep], kind="stable")]]
         for b0 in range(0, len(cands), 8):  # shortest first, a few at a time
             batch = cands[b0:b0 + 8]
             legs0, legs1, owner = [], [], []
@@ -158,9 +159,12 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
                 legs0 += chain[:-1]
                 legs1 += chain[1:]
                 owner += [i] * (len(chain) - 1)
-            lb = site.segment_clearance(np.array(legs0), np.array(legs1), LEG_STEP, cap)
+            legs0, legs1, owner = np.array(legs0), np.array(legs1), np.array(owner)
+            ok = site.segment_clearance(legs0, legs1, LEG_STEP, cap) >= leg_required
+            if ground is not None and ok.any():  # legs between high and low ground
+                ok[ok] = site.legs_above_ground(legs0[ok], legs1[ok], ground)
             good = np.ones(len(batch), bool)
-            np.logical_and.at(good, np.array(owner), lb >= leg_required)
+            np.logical_and.at(good, owner, ok)
             if good.any():
                 return batch[int(np.argmax(good))]
     return None
@@ -175,8 +179,16 @@ def _away(site: Site, x: np.ndarray, h: float = 0.25) -> np.ndarray:
     return g / n if n > 1e-9 else Z
 
 
-def _chain_length(chain: list[np.ndarray]) -> float:
-    return float(sum(np.linalg.norm(b - a) for a, b in zip(chain[:-1], chain[1:])))
+def _chain_lengths(p: np.ndarray, q: np.ndarray, vp: np.ndarray, vo: np.ndarray) -> np.ndarray:
+    """Length of each chain p -> its via points -> q; the via points ``vp`` of chain i are the
+    rows where ``vo`` == i, in order (``vo`` sorted, every chain with at least one)."""
+    first = np.r_[True, vo[1:] != vo[:-1]]
+    last = np.r_[vo[1:] != vo[:-1], True]
+    step = np.linalg.norm(vp - np.where(first[:, None], p, np.roll(vp, 1, axis=0)), axis=1)
+    step[last] += np.linalg.norm(vp[last] - q, axis=1)
+    out = np.zeros(int(vo[-1]) + 1 if len(vo) else 0)
+    np.add.at(out, vo, step)
+    return out
 
 
 # ---- blades ------------------------------------------------------------------------------------------
@@ -317,11 +329,10 @@ def _arc(turbine: Turbine, frame: tuple, s: float, g_from: float, g_to: float, r
     if long_way:
         dg -= math.copysign(2 * math.pi, dg)
     m = max(1, int(math.ceil(abs(dg) / math.radians(step_deg))))
-    out = []
-    for j in range(1, m):
-        g = g_from + dg * j / m
-        out.append(turbine.hub_center + s * d + radius * (math.cos(g) * c + math.sin(g) * n))
-    return out
+    if m == 1:
+        return []
+    g = g_from + dg * np.arange(1, m) / m
+    return list(turbine.hub_center + s * d + radius * (np.cos(g)[:, None] * c + np.sin(g)[:, None] * n))
 
 
 def _join(wps: list[WP], q: np.ndarray, q_fwd: np.ndarray, turbine: Turbine, k: int, site: Site,
@@ -490,7 +501,7 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
                                                          prev[2] - turbine.base_xyz[2]])
                             for s in range(1, steps)]).reshape(-1, 3)
             if len(arc):
-                arc = arc[site.clearance(arc, pp.required) >= pp.required]
+                arc = arc[_filter_stations(site, pp, arc)]  # clear of every part and the ground
             new += [WP(v, None, False, comp) for v in arc]
         new += [WP(p, f, True, comp) for p, f in zip(pos[keep], fwd[keep])]
         append_chain(chunk, site, pp, new, droppable=True)

@@ -127,6 +127,8 @@ class Site:
         f = np.floor((P[:, :2] - self._origin) / self._cell)
         # Outside the grid (or NaN): outside every box, by the same monotonicity.
         ok = ((f >= 0) & (f < self._shape)).all(axis=1)
+        if ok.all() and len(P) and (f == f[0]).all():
+            return self._pairs_in_cell(P, grow, int(f[0, 0]) * int(self._shape[1]) + int(f[0, 1]))
         pt = np.nonzero(ok)[0]
         cell = f[pt, 0].astype(np.int64) * self._shape[1] + f[pt, 1].astype(np.int64)
         first = self._start[cell]
@@ -143,6 +145,23 @@ class Site:
         pp, tt = pp[inside], tt[inside]
         order = np.argsort(tt, kind="stable")
         return pp[order], tt[order]
+
+    def _pairs_in_cell(self, P: np.ndarray, grow: float, cell: int) -> tuple[np.ndarray, np.ndarray]:
+        """``_pairs`` when every point lies in one cell (most queries: a leg or a few points
+        near one turbine): the same pairs, the same order, a box at a time."""
+        pps, tts = [], []
+        for t in self._members[self._start[cell]:self._start[cell + 1]]:  # ascending
+            if grow == self.horizon:
+                inside = ((P >= self.lo[t]) & (P <= self.hi[t])).all(axis=1)
+            else:
+                lo, hi = self.part_lo[t] - grow, self.part_hi[t] + grow
+                inside = ((P[:, None] >= lo) & (P[:, None] <= hi)).all(axis=2).any(axis=1)
+            idx = np.nonzero(inside)[0]
+            pps.append(idx)
+            tts.append(np.full(len(idx), t, np.int64))
+        if not pps:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        return np.concatenate(pps), np.concatenate(tts)
 
     def _groups(self, P: np.ndarray, grow: float):
         """(turbine index, indices of the points in its grown box) for each turbine with any."""
@@ -277,6 +296,28 @@ class Site:
         first = np.flatnonzero(new)
         last = np.maximum.reduceat(j1, first)
         return ii[first], j0[first] - ii[first] * span, last - ii[first] * span
+
+    def legs_above_ground(self, p0: np.ndarray, p1: np.ndarray, height: float,
+                          step: float = 0.5) -> np.ndarray:
+        """(K,) bool: each straight leg p0[i] -> p1[i] stays ``height`` above the ground model
+        (``ground_z``) at its ends and at samples at most ``step`` apart. On a site whose ground
+        points are all at one level the ends decide (the leg is straight); elsewhere a leg can
+        cross into a higher base's ground between two low ends."""
+        p0 = np.atleast_2d(np.asarray(p0, float))
+        p1 = np.atleast_2d(np.asarray(p1, float))
+        if len(p0) == 0:
+            return np.zeros(0, bool)
+        if np.ptp(self.ground_points[:, 2]) == 0.0:
+            n = np.ones(len(p0), np.int64)
+        else:
+            n = np.maximum(1, np.ceil(np.linalg.norm(p1 - p0, axis=1) / step).astype(np.int64))
+        seg = np.repeat(np.arange(len(p0)), n + 1)
+        start = np.repeat(np.cumsum(n + 1) - (n + 1), n + 1)
+        t = (np.arange(len(seg)) - start) / np.repeat(n, n + 1)
+        X = p0[seg] + (p1 - p0)[seg] * t[:, None]
+        ok = np.ones(len(p0), bool)
+        np.logical_and.at(ok, seg, X[:, 2] >= self.ground_z(X) + height - 1e-6)
+        return ok
 
     def ground_z(self, points: np.ndarray) -> np.ndarray:
         """Ground level under each point: the height of the nearest turbine base or launch point
