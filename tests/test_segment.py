@@ -388,3 +388,40 @@ def test_segment_image_keeps_low_score_blades_as_completion_candidates(monkeypat
     assert list(inst.labels) == ["blade", "blade", "nacelle"]
     plain = infer.segment_image(img, model=object(), candidate_floor=None)
     assert asked[-1] == 0.5 and list(plain.scores) == [0.9, 0.6]
+
+
+def _png_header_only(w: int, h: int) -> bytes:
+    """A PNG whose header declares w x h pixels (a decompression bomb's shape), tiny on disk."""
+    import struct
+    import zlib
+
+    def chunk(t: bytes, d: bytes) -> bytes:
+        return struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d) & 0xFFFFFFFF)
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(b"\x00" * 301)) + chunk(b"IEND", b""))
+
+
+def test_segment_folder_with_corrupt_non_image_and_huge_files(cli, photo_folder, random_weights, tmp_path):
+    """The done-when case: a corrupt JPEG, a text file named like an image, a drone-size photo
+    (5472 x 3648, processed downscaled, outputs at full size) and a header declaring 100 000^2
+    pixels. The readable ones finish, the three bad ones are reported each on one clear line."""
+    (photo_folder / "broken.jpg").write_bytes(b"\xff\xd8\xff garbage")
+    (photo_folder / "notes.png").write_text("meeting notes, not a photo")
+    (photo_folder / "bomb.png").write_bytes(_png_header_only(100_000, 100_000))
+    big = cv2.resize(_image(seed=4), (5472, 3648), interpolation=cv2.INTER_NEAREST)
+    cv2.imwrite(str(photo_folder / "drone.jpg"), big)
+    out = tmp_path / "seg"
+    res = cli("segment", photo_folder, "--out", out, "--model", random_weights, "--json")
+    assert res.exit_code == ExitCode.PARTIAL
+    report = {r["file"]: r for r in json.loads(res.stdout)["images"]}
+    assert {f: r["status"] for f, r in report.items()} == {
+        "a.png": "ok", "b.jpg": "ok", "drone.jpg": "ok",
+        "broken.jpg": "error", "notes.png": "error", "bomb.png": "error"}
+    assert "not a readable image" in report["broken.jpg"]["error"]
+    assert "not a readable image" in report["notes.png"]["error"]
+    assert "too large to decode" in report["bomb.png"]["error"]
+    for r in report.values():
+        assert r["error"] is None or "\n" not in r["error"]
+    assert (report["drone.jpg"]["width"], report["drone.jpg"]["height"]) == (5472, 3648)
+    assert cv2.imread(str(out / "overlay" / "drone.png")).shape == (3648, 5472, 3)
+    assert "3 of 6 images failed" in res.stderr

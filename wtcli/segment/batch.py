@@ -27,6 +27,7 @@ from wtcli.masks import LABELS, Instances, instances_document, read_instances, w
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff")
 REPORT_SCHEMA = "wtinspect.segment_report"
+MAX_DECODE_PIXELS = 1 << 30  # OpenCV's CV_IO_MAX_IMAGE_PIXELS default
 
 
 @dataclass
@@ -78,7 +79,13 @@ def read_image(path: Path) -> np.ndarray:
         data = np.fromfile(str(path), dtype=np.uint8)
     except OSError as e:
         raise InputError(f"{path}: cannot read ({e.__class__.__name__})") from None
-    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    try:
+        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    except cv2.error as e:  # OpenCV refuses to allocate a decompression bomb
+        if "CV_IO_MAX_IMAGE_PIXELS" in str(e):
+            raise InputError(f"{path}: image too large to decode (over {MAX_DECODE_PIXELS:,} pixels, "
+                             "OpenCV's limit); downscale it first") from None
+        raise InputError(f"{path}: not a readable image ({e.__class__.__name__})") from None
     if img is None:
         raise InputError(f"{path}: not a readable image (corrupt or unsupported format)")
     if img.dtype == np.uint16:
