@@ -764,3 +764,33 @@ def test_plan_over_uneven_ground_keeps_every_leg_above_it():
             g = G[np.argmin(np.linalg.norm(X[:, None, :2] - G[None, :, :2], axis=2), axis=1), 2]
             assert (X[:, 2] >= g + m.settings.min_altitude_m - 1e-6).all(), (r.uav, i, r.component[i + 1])
     assert_safe(plan, m.settings.safe_distance_m)
+
+
+def test_cli_photo_with_a_low_score_blade_admits_it_and_says_so(cli, tmp_path, monkeypatch):
+    """The segmenter scores one blade 0.3 (below segment's 0.5): pitch's rotor completion
+    admits it inside plan's photo path, the console names it, and the azimuths are the truth."""
+    import cv2
+
+    from wtcli.geometry.render import instance_masks
+    from wtcli.masks import Instances
+    from wtcli.segment import infer
+
+    m = load_mission(SAMPLE)
+    t = m.turbine("T2")
+    cam = default_photo_camera(t, Camera(800, 600, 16, 23.2))
+    inst = instance_masks(t, cam)
+    first_blade = next(i for i, (label, _, _) in enumerate(inst) if label == "blade")
+    scores = np.array([0.3 if i == first_blade else 0.95 for i in range(len(inst))])
+    low = Instances(np.array([x[0] for x in inst], dtype=object), np.array([x[2] for x in inst]),
+                    scores)
+    monkeypatch.setattr(infer, "segment_image", lambda image, **kw: low)
+    photo = tmp_path / "t2.png"
+    cv2.imwrite(str(photo), np.full((600, 800, 3), 200, np.uint8))
+    r = cli("plan", SAMPLE, f"T2={photo}", "--out", tmp_path / "plan.json")
+    assert r.exit_code == 0, r.output
+    out = " ".join(r.output.split())
+    assert "detected at score 0.30, below 0.5, and admitted to complete the rotor" in out
+    assert "inferred from the rotor's even spacing" not in out
+    got = sorted(read_plan(tmp_path / "plan.json").turbine("T2").azimuths_deg)
+    for g, w in zip(got, sorted(t.azimuths_deg)):
+        assert abs((g - w + 180) % 360 - 180) < 2.0

@@ -68,6 +68,7 @@ def _pitch_results(path: Path, expected: int):
     kw = {"image": {"file_name": path.name, "width": w, "height": h}, "source": str(path)}
     # One blade short is kept (blade_azimuths completes the rotor); any other count gets pitch's
     # own treatment: trimmed to the rotor's blades where that is clear, else refused.
+    kw["rotor_blades"] = expected  # what a low-score blade may complete the rotor to
     res = pitch_from_instances(inst, expected_blades=None, **kw)
     if len(res.blades) != expected and not (expected >= 3 and len(res.blades) == expected - 1):
         res = pitch_from_instances(inst, expected_blades=expected, **kw)
@@ -186,6 +187,10 @@ def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None 
                 az = azimuths_from_pitch(t, res, mission.camera, p)
             except ValueError as e:
                 raise InputError(f"{name}: {e}") from None
+            for b in res.admitted:
+                notes.setdefault(owner, []).append(
+                    f"{name}: the blade at image angle {b.phi_deg:.1f} deg was detected at score "
+                    f"{b.score:.2f}, below {res.score_threshold:g}, and admitted to complete the rotor")
             if short:
                 az, inferred = complete_rotor(az, t.n_blades, f"{name}: turbine {owner}")
                 az = sorted(az, key=lambda a: (a - 90.0) % 360.0)  # as azimuths_from_pitch
