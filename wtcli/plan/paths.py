@@ -519,13 +519,15 @@ def append_chain(chunk: Chunk, site: Site, pp: PassParams, new: list[WP],
     bad = np.zeros(len(new), bool)
     if len(pts) > 1:
         lb = site.segment_clearance(pts[:-1], pts[1:], LEG_STEP, pp.required)
-        bad[len(new) - len(lb):] = lb < pp.leg_required
+        bad[len(new) - len(lb):] = (lb < pp.leg_required) | \
+            ~site.legs_above_ground(pts[:-1], pts[1:], pp.min_altitude)
     dropped = False
     for w, b in zip(new, bad):
         if dropped and chunk.wps:  # the previous station was left out: check this leg afresh
             prev = chunk.wps[-1].pos
             b = site.segment_clearance(prev[None], w.pos[None], LEG_STEP, pp.required)[0] \
-                < pp.leg_required
+                < pp.leg_required or not site.legs_above_ground(prev[None], w.pos[None],
+                                                                 pp.min_altitude)[0]
         dropped = False
         if b:
             p = chunk.wps[-1].pos
