@@ -794,3 +794,19 @@ def test_cli_photo_with_a_low_score_blade_admits_it_and_says_so(cli, tmp_path, m
     got = sorted(read_plan(tmp_path / "plan.json").turbine("T2").azimuths_deg)
     for g, w in zip(got, sorted(t.azimuths_deg)):
         assert abs((g - w + 180) % 360 - 180) < 2.0
+
+
+def test_unreachable_root_station_is_dropped_and_coverage_decides():
+    """A property case (seed 10190: 6 m required clearance, the trailing edge's root stations
+    wedged between the blade and the nacelle) used to refuse the whole mission for one leg. Now
+    the station is left out with a note naming the blocker: the plan is safe, and with a
+    coverage floor the refusal says which side, how much, and what blocks it."""
+    import dataclasses
+
+    case = random_case(np.random.default_rng(10190))
+    plan = plan_mission(case)
+    assert_safe(plan, case.settings.safe_distance_m)
+    assert any("blocked by T1 nacelle" in n and "dropped" in n for n in plan.summary["notes"])
+    strict = dataclasses.replace(case, settings=dataclasses.replace(case.settings, min_side_coverage=0.9))
+    with pytest.raises(PlanError, match=r"trailing_edge: predicted coverage .*blocked by T1 nacelle"):
+        plan_mission(strict)

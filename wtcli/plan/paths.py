@@ -305,8 +305,10 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
             if attempt:
                 chunk.notes.append(f"{comp}: {attempt} first station(s) unreachable from the "
                                    "previous pass: dropped")
+        # A station no way round the blade or detour reaches (wedged between the root and the
+        # nacelle at a large safe distance) is left out with a note; coverage then decides.
         append_chain(chunk, site, pp, [WP(p, f, True, comp) for p, f in zip(pos, fwd)],
-                     blade=(turbine, k))
+                     droppable=True, blade=(turbine, k))
     wps = chunk.wps
     if not wps:
         chunk.notes.append(f"{label}: no safe station at all")
@@ -543,7 +545,9 @@ def append_chain(chunk: Chunk, site: Site, pp: PassParams, new: list[WP],
                 vias = connect(site, p, w.pos, pp.leg_required, ground=pp.min_altitude)
             if vias is None:
                 if droppable:
-                    chunk.notes.append(f"{w.component}: a station no safe path reaches: dropped")
+                    near = site.nearest_part(0.5 * (p + w.pos))[0]  # what the leg runs into
+                    chunk.notes.append(f"{w.component}: a station no safe path reaches "
+                                       f"(blocked by {near}): dropped")
                     dropped = True
                     continue
                 raise _Blocked(f"no safe way between two {w.component} stations")
