@@ -239,7 +239,8 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
             vias = connect(site, p, q, pp.leg_required, ground=s.min_altitude_m)
         if vias is None:
             raise PlanError(f"{uav}: no safe straight or detoured path {what} keeping "
-                            f"{pp.leg_required:.2f} m from every turbine part")
+                            f"{pp.leg_required:.2f} m from every turbine part and "
+                            f"{s.min_altitude_m:g} m above the ground")
         return [WP(v, None, False, comp, not fast) for v in vias]
 
     def takeoff() -> None:
