@@ -810,3 +810,23 @@ def test_unreachable_root_station_is_dropped_and_coverage_decides():
     strict = dataclasses.replace(case, settings=dataclasses.replace(case.settings, min_side_coverage=0.9))
     with pytest.raises(PlanError, match=r"trailing_edge: predicted coverage .*blocked by T1 nacelle"):
         plan_mission(strict)
+
+
+def test_legs_above_ground_is_exact_against_dense_sampling():
+    """The leg test works out, per leg, the stretch over each base's flat ground (the nearest
+    base's region, convex) instead of sampling; it must agree with samples every 5 cm."""
+    from wtcli.plan.safety import Site
+
+    rng = np.random.default_rng(3)
+    for n in (3, 20):
+        ts = [make_turbine(tid=f"T{i}", base=(float(rng.uniform(0, 500)), float(rng.uniform(0, 500)),
+                                              float(rng.uniform(0, 40)))) for i in range(n)]
+        site = Site(ts, launch=np.array([-50.0, -50.0, 0.0]))
+        p0 = np.c_[rng.uniform(-80, 580, (100, 2)), rng.uniform(0, 60, 100)]
+        p1 = np.c_[rng.uniform(-80, 580, (100, 2)), rng.uniform(0, 60, 100)]
+        got = site.legs_above_ground(p0, p1, 5.0)
+        for i in range(len(p0)):
+            m = int(np.ceil(np.linalg.norm(p1[i] - p0[i]) / 0.05)) + 1
+            X = p0[i] + (p1[i] - p0[i]) * np.linspace(0, 1, m)[:, None]
+            assert got[i] == bool((X[:, 2] >= site.ground_z(X) + 5.0 - 1e-6).all()), i
+        assert 10 < got.sum() < 90  # both answers occur

@@ -297,35 +297,74 @@ class Site:
         last = np.maximum.reduceat(j1, first)
         return ii[first], j0[first] - ii[first] * span, last - ii[first] * span
 
-    def legs_above_ground(self, p0: np.ndarray, p1: np.ndarray, height: float,
-                          step: float = 0.5) -> np.ndarray:
+    def legs_above_ground(self, p0: np.ndarray, p1: np.ndarray, height: float) -> np.ndarray:
         """(K,) bool: each straight leg p0[i] -> p1[i] stays ``height`` above the ground model
-        (``ground_z``) at its ends and at samples at most ``step`` apart. On a site whose ground
-        points are all at one level the ends decide (the leg is straight); elsewhere a leg can
-        cross into a higher base's ground between two low ends."""
+        (``ground_z``) all along, exactly (no sampling): a leg between two low ends may cross a
+        higher base's ground."""
         p0 = np.atleast_2d(np.asarray(p0, float))
         p1 = np.atleast_2d(np.asarray(p1, float))
         if len(p0) == 0:
             return np.zeros(0, bool)
-        if np.ptp(self.ground_points[:, 2]) == 0.0:
-            n = np.ones(len(p0), np.int64)
-        else:
-            n = np.maximum(1, np.ceil(np.linalg.norm(p1 - p0, axis=1) / step).astype(np.int64))
-        seg = np.repeat(np.arange(len(p0)), n + 1)
-        start = np.repeat(np.cumsum(n + 1) - (n + 1), n + 1)
-        t = (np.arange(len(seg)) - start) / np.repeat(n, n + 1)
-        X = p0[seg] + (p1 - p0)[seg] * t[:, None]
+        G = self.ground_points
+        i0, i1 = self.ground_index(p0), self.ground_index(p1)
+        ok = (p0[:, 2] >= G[i0, 2] + height - 1e-6) & (p1[:, 2] >= G[i1, 2] + height - 1e-6)
+        # The ends decide where the ground under the leg cannot rise: both ends over the same
+        # ground point (its region is convex, so the leg stays in it), or the lower end above
+        # the highest ground of the site. Only the other legs are sampled.
+        todo = np.nonzero(ok & (i0 != i1)
+                          & (np.minimum(p0[:, 2], p1[:, 2]) < G[:, 2].max() + height - 1e-6))[0]
+        if len(todo):
+            ok[todo] = self._above_each_ground(p0[todo], p1[todo], height)
+        return ok
+
+    def _above_each_ground(self, p0: np.ndarray, p1: np.ndarray, height: float) -> np.ndarray:
+        """``legs_above_ground`` for legs whose ground may change under them: the part
+        of a leg over ground point j is the interval of t where j is at least as near as every
+        other ground point (linear in t: |x - g_j|^2 <= |x - g_k|^2), closed, so a boundary
+        counts for both sides; the leg fails where that interval meets the stretch where its
+        height (linear in t) is below g_j's level + ``height``."""
+        G = self.ground_points
+        g = G[:, :2]
+        c = (g * g).sum(axis=1)
         ok = np.ones(len(p0), bool)
-        np.logical_and.at(ok, seg, X[:, 2] >= self.ground_z(X) + height - 1e-6)
+        per = max(1, 2_000_000 // max(1, len(G) * len(G)))  # legs per block: bounded memory
+        for s0 in range(0, len(p0), per):
+            P0, P1 = p0[s0:s0 + per], p1[s0:s0 + per]
+            D = (P1 - P0)[:, :2]
+            Dg = g[None, :, :] - g[:, None, :]  # (j, k, 2): g_k - g_j
+            a = 2.0 * np.einsum("li,jki->ljk", D, Dg)  # a t <= b for j nearer than k
+            b = (c[None, :] - c[:, None])[None] - 2.0 * np.einsum("li,jki->ljk", P0[:, :2], Dg)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                r = b / a
+            lo = np.where(a < 0, r, -np.inf).max(axis=2)
+            hi = np.where(a > 0, r, np.inf).min(axis=2)
+            never = ((a == 0) & (b < 0)).any(axis=2)  # parallel to a boundary, on its far side
+            lo, hi = np.maximum(lo, 0.0), np.minimum(hi, 1.0)
+            # Where the leg is too low over ground j: z0 + t dz < z_j + height.
+            z0, dz = P0[:, 2:3], (P1 - P0)[:, 2:3]
+            need = G[None, :, 2] + height - 1e-6 - z0  # t dz < need
+            with np.errstate(divide="ignore", invalid="ignore"):
+                tz = need / dz
+            low_lo = np.where(dz > 0, -np.inf, np.where(dz < 0, tz, np.where(need > 0, -np.inf, np.inf)))
+            low_hi = np.where(dz > 0, tz, np.where(dz < 0, np.inf, np.where(need > 0, np.inf, -np.inf)))
+            # Strict inequality against a closed interval: a touch exactly at the limit is fine.
+            bad = ~never & (np.maximum(lo, low_lo) < np.minimum(hi, low_hi)) | \
+                ~never & (lo <= hi) & (low_lo == -np.inf) & (low_hi == np.inf)
+            ok[s0:s0 + per] = ~bad.any(axis=1)
         return ok
 
     def ground_z(self, points: np.ndarray) -> np.ndarray:
         """Ground level under each point: the height of the nearest turbine base or launch point
         (a flat site around each of them; the first of equally near ones)."""
+        return self.ground_points[self.ground_index(points), 2]
+
+    def ground_index(self, points: np.ndarray) -> np.ndarray:
+        """Index (into ``ground_points``) of the ground point nearest each point in x/y, the
+        first of equally near ones. The points with one index form a convex region."""
         P = np.atleast_2d(points)
         G = self.ground_points
         if len(G) <= GROUND_BRUTE_FORCE or len(P) == 0:
-            return G[self._nearest_ground(P), 2]
+            return self._nearest_ground(P)
         # The ground points in the 3 x 3 cells around each point's cell: where the nearest of
         # them is within one cell size, no point further out can be nearer (nor as near).
         f = np.floor((P[:, :2] - self._g_origin) / self._g_cell)
@@ -351,7 +390,7 @@ class Site:
         rest = np.nonzero(~found)[0]
         if len(rest):
             best[rest] = self._nearest_ground(P[rest])
-        return G[best, 2]
+        return best
 
     def _nearest_ground(self, P: np.ndarray) -> np.ndarray:
         d = np.linalg.norm(P[:, None, :2] - self.ground_points[None, :, :2], axis=2)
