@@ -310,7 +310,7 @@ class Site:
         ok = (p0[:, 2] >= G[i0, 2] + height - 1e-6) & (p1[:, 2] >= G[i1, 2] + height - 1e-6)
         # The ends decide where the ground under the leg cannot rise: both ends over the same
         # ground point (its region is convex, so the leg stays in it), or the lower end above
-        # the highest ground of the site. Only the other legs are sampled.
+        # the highest ground of the site. Only the other legs need the regions worked out.
         todo = np.nonzero(ok & (i0 != i1)
                           & (np.minimum(p0[:, 2], p1[:, 2]) < G[:, 2].max() + height - 1e-6))[0]
         if len(todo):
@@ -318,39 +318,29 @@ class Site:
         return ok
 
     def _above_each_ground(self, p0: np.ndarray, p1: np.ndarray, height: float) -> np.ndarray:
-        """``legs_above_ground`` for legs whose ground may change under them: the part
-        of a leg over ground point j is the interval of t where j is at least as near as every
-        other ground point (linear in t: |x - g_j|^2 <= |x - g_k|^2), closed, so a boundary
-        counts for both sides; the leg fails where that interval meets the stretch where its
-        height (linear in t) is below g_j's level + ``height``."""
+        """``legs_above_ground`` for legs whose ground may change under them: the part of a leg
+        over ground point j is the interval of t where j is at least as near as every other
+        ground point (linear in t: |x - g_j|^2 <= |x - g_k|^2; closed, so a boundary counts for
+        both sides), and the leg's height is linear, so its lowest point there is at an end of
+        that interval."""
         G = self.ground_points
         g = G[:, :2]
         c = (g * g).sum(axis=1)
+        Dg = g[None, :, :] - g[:, None, :]  # (j, k, 2): g_k - g_j
         ok = np.ones(len(p0), bool)
         per = max(1, 2_000_000 // max(1, len(G) * len(G)))  # legs per block: bounded memory
         for s0 in range(0, len(p0), per):
             P0, P1 = p0[s0:s0 + per], p1[s0:s0 + per]
-            D = (P1 - P0)[:, :2]
-            Dg = g[None, :, :] - g[:, None, :]  # (j, k, 2): g_k - g_j
-            a = 2.0 * np.einsum("li,jki->ljk", D, Dg)  # a t <= b for j nearer than k
+            a = 2.0 * np.einsum("li,jki->ljk", (P1 - P0)[:, :2], Dg)  # a t <= b: j not farther than k
             b = (c[None, :] - c[:, None])[None] - 2.0 * np.einsum("li,jki->ljk", P0[:, :2], Dg)
             with np.errstate(divide="ignore", invalid="ignore"):
                 r = b / a
-            lo = np.where(a < 0, r, -np.inf).max(axis=2)
-            hi = np.where(a > 0, r, np.inf).min(axis=2)
-            never = ((a == 0) & (b < 0)).any(axis=2)  # parallel to a boundary, on its far side
-            lo, hi = np.maximum(lo, 0.0), np.minimum(hi, 1.0)
-            # Where the leg is too low over ground j: z0 + t dz < z_j + height.
+            lo = np.maximum(np.where(a < 0, r, -np.inf).max(axis=2), 0.0)
+            hi = np.minimum(np.where(a > 0, r, np.inf).min(axis=2), 1.0)
+            over = (lo <= hi) & ~((a == 0) & (b < 0)).any(axis=2)  # the leg passes over j
             z0, dz = P0[:, 2:3], (P1 - P0)[:, 2:3]
-            need = G[None, :, 2] + height - 1e-6 - z0  # t dz < need
-            with np.errstate(divide="ignore", invalid="ignore"):
-                tz = need / dz
-            low_lo = np.where(dz > 0, -np.inf, np.where(dz < 0, tz, np.where(need > 0, -np.inf, np.inf)))
-            low_hi = np.where(dz > 0, tz, np.where(dz < 0, np.inf, np.where(need > 0, np.inf, -np.inf)))
-            # Strict inequality against a closed interval: a touch exactly at the limit is fine.
-            bad = ~never & (np.maximum(lo, low_lo) < np.minimum(hi, low_hi)) | \
-                ~never & (lo <= hi) & (low_lo == -np.inf) & (low_hi == np.inf)
-            ok[s0:s0 + per] = ~bad.any(axis=1)
+            lowest = np.minimum(z0 + lo * dz, z0 + hi * dz)  # lo, hi are within [0, 1]
+            ok[s0:s0 + per] = ~(over & (lowest < G[None, :, 2] + height - 1e-6)).any(axis=1)
         return ok
 
     def ground_z(self, points: np.ndarray) -> np.ndarray:
