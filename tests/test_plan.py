@@ -830,3 +830,36 @@ def test_legs_above_ground_is_exact_against_dense_sampling():
             X = p0[i] + (p1[i] - p0[i]) * np.linspace(0, 1, m)[:, None]
             assert got[i] == bool((X[:, 2] >= site.ground_z(X) + 5.0 - 1e-6).all()), i
         assert 10 < got.sum() < 90  # both answers occur
+
+
+def _stepped_row():
+    """A row down a slope: T3 on ground 16 m above the launch point, T2 in line between them
+    (from the property suite, seed 10 335)."""
+    return (make_turbine(az=10.0, yaw=288.8, tid="T1", base=(0.0, -33.0, 2.3), hub_height=48.3,
+                         rotor_diameter=49.2),
+            make_turbine(az=0.0, yaw=195.8, tid="T2", base=(273.9, -10.3, 5.4), hub_height=88.3,
+                         rotor_diameter=88.6),
+            make_turbine(az=40.0, yaw=185.2, tid="T3", base=(530.5, -14.5, 18.4), hub_height=67.0,
+                         rotor_diameter=96.4))
+
+
+def test_return_from_higher_ground_past_a_turbine_holds_its_height():
+    """From the foot of T3's tower back to the launch point: the straight leg hits T2's tower,
+    and a detour that descends on the way dips below T3's ground before leaving it. The way
+    found must clear both, checked densely (was refused: 'no safe ... path back')."""
+    from wtcli.plan.paths import connect
+    from wtcli.plan.safety import Site
+
+    ts = _stepped_row()
+    launch = np.array([-56.8, -13.6, 2.3])
+    site = Site(ts, launch=launch)
+    p, q = np.array([540.16, -12.26, 23.92]), launch + (0.0, 0.0, 10.0)
+    vias = connect(site, p, q, 4.55, ground=5.0)
+    assert vias is not None
+    chain = np.array([p] + list(vias) + [q])
+    G = np.array([t.base for t in ts] + [launch], float)
+    for a, b in zip(chain[:-1], chain[1:]):
+        X = a + (b - a) * np.linspace(0, 1, int(np.linalg.norm(b - a) / 0.05) + 2)[:, None]
+        g = G[np.argmin(np.linalg.norm(X[:, None, :2] - G[None, :, :2], axis=2), axis=1), 2]
+        assert (X[:, 2] >= g + 5.0 - 1e-6).all()
+        assert min(t.clearance(X).min() for t in ts) >= 4.55

@@ -320,7 +320,7 @@ def check_routes(routes: list[Route], site: Site, launch: np.ndarray, safe: floa
         bad_w = np.nonzero(c < safe)[0]
         bad_l = np.nonzero(lb < safe)[0]
         at_launch = np.linalg.norm(r.pos[:, :2] - launch[:2], axis=1) < 0.5
-        low_wp = (r.pos[:, 2] < site.ground_z(r.pos) + min_alt - 1e-6) & ~at_launch
+        low_wp = ~site.above_ground(r.pos, min_alt - 1e-6) & ~at_launch
         # Legs too, but not those the take-off and landing fly at the launch point.
         free = np.nonzero(~at_launch[:-1] & ~at_launch[1:])[0]
         low = low_wp.copy()

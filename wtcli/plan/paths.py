@@ -131,16 +131,26 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
             uniq.append(u)
     dirs = uniq
     gp, gq = _away(site, p), _away(site, q)  # straight away from the nearest part
+    # Between grounds of different heights, a chain whose vias drop below the higher end's
+    # height may dip too low over the higher ground before leaving it: also try each two-via
+    # chain with its vias lifted to that height (hold it, then descend at the far end).
+    zc = max(p[2], q[2])
+    lifted = ground is not None and site.ground_z(p[None])[0] != site.ground_z(q[None])[0]
+
+    def lift(v: np.ndarray) -> np.ndarray:
+        return np.r_[v[:2], max(v[2], zc)]
     for dist in (2.0, 4.0, 7.0, 11.0, 16.0, 24.0, 35.0, 50.0, 70.0, 95.0):  # nearest first
         cands = [[m + dist * u] for u in dirs] + [[p + dist * u] for u in dirs] + \
             [[q + dist * u] for u in dirs] + [[p + dist * u, q + dist * u] for u in dirs]
         cands += [[p + dist * gp, q + dist * gq]]
         cands += [[p + dist * gp, m + dist * u, q + dist * gq] for u in dirs]
+        if lifted:
+            cands += [[lift(p + dist * u), lift(q + dist * u)] for u in dirs]
         vp = np.array([v for c in cands for v in c])
         vo = np.repeat(np.arange(len(cands)), [len(c) for c in cands])
         if ground is not None:  # height above the local ground (nearest base or launch point)
             okg = np.ones(len(cands), bool)
-            np.logical_and.at(okg, vo, vp[:, 2] >= site.ground_z(vp) + ground)
+            np.logical_and.at(okg, vo, site.above_ground(vp, ground))
             cands = [c for c, ok in zip(cands, okg) if ok]
             vp, vo = vp[okg[vo]], vo[okg[vo]]
             vo = np.cumsum(okg)[vo] - 1  # renumbered over the candidates kept
@@ -264,7 +274,7 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
             J, AL, EX = J.ravel(), AL.ravel(), EX.ravel()
             cp, cf = _side_points(turbine, k, S[J], g0 + sign * AL, pp.standoff + EX)
             ok = (site.clearance(cp, pp.required) >= pp.required) & \
-                (cp[:, 2] >= site.ground_z(cp) + pp.min_altitude)
+                site.above_ground(cp, pp.min_altitude)
             per = len(alphas) * len(closer + extra)
             okm = ok.reshape(len(jj), per)
             first = np.argmax(okm, axis=1)
@@ -408,7 +418,7 @@ def _join(wps: list[WP], q: np.ndarray, q_fwd: np.ndarray, turbine: Turbine, k: 
             if pts:
                 P = np.array(pts)
                 okp = (site.clearance(P, pp.required) >= pp.required) & \
-                    (P[:, 2] >= site.ground_z(P) + pp.min_altitude)
+                    site.above_ground(P, pp.min_altitude)
                 np.logical_and.at(good, np.array(pown), okp)
             if good.any():
                 wps += [WP(v, None, False, comp) for v in batch[int(np.argmax(good))]]
@@ -428,7 +438,7 @@ class _Blocked(Exception):
 # ---- nacelle and tower (fixed) ------------------------------------------------------------------------
 def _filter_stations(site: Site, pp: PassParams, pos: np.ndarray) -> np.ndarray:
     ok = site.clearance(pos, pp.required) >= pp.required
-    ok &= pos[:, 2] >= site.ground_z(pos) + pp.min_altitude
+    ok &= site.above_ground(pos, pp.min_altitude)
     return ok
 
 
@@ -611,7 +621,7 @@ def gap_views(turbine: Turbine, pts: np.ndarray, nrm: np.ndarray, area: np.ndarr
     C = S[:, None, None, :] + R[None, None, :, None] * U[:, :, None, :]  # (seed, dir, dist, 3)
     target = np.broadcast_to(S[:, None, None, :], C.shape).reshape(-1, 3)
     C = C.reshape(-1, 3)
-    ok = C[:, 2] >= site.ground_z(C) + pp.min_altitude
+    ok = site.above_ground(C, pp.min_altitude)
     ok[ok] = site.clearance(C[ok], pp.required) >= pp.required
     C, target = C[ok], target[ok]
     if len(C) == 0:

@@ -306,13 +306,19 @@ class Site:
         if len(p0) == 0:
             return np.zeros(0, bool)
         G = self.ground_points
-        i0, i1 = self.ground_index(p0), self.ground_index(p1)
-        ok = (p0[:, 2] >= G[i0, 2] + height - 1e-6) & (p1[:, 2] >= G[i1, 2] + height - 1e-6)
-        # The ends decide where the ground under the leg cannot rise: both ends over the same
-        # ground point (its region is convex, so the leg stays in it), or the lower end above
-        # the highest ground of the site. Only the other legs need the regions worked out.
-        todo = np.nonzero(ok & (i0 != i1)
-                          & (np.minimum(p0[:, 2], p1[:, 2]) < G[:, 2].max() + height - 1e-6))[0]
+        top = G[:, 2].max() + height - 1e-6 if len(G) else -np.inf
+        ok = np.ones(len(p0), bool)
+        # A leg whose lower end is above the site's highest ground stays above all of it: most
+        # legs (passes at rotor height) are settled without finding the ground under them.
+        low = np.nonzero(np.minimum(p0[:, 2], p1[:, 2]) < top)[0]
+        if len(low) == 0:
+            return ok
+        a, b = p0[low], p1[low]
+        i0, i1 = self.ground_index(a), self.ground_index(b)
+        ok[low] = (a[:, 2] >= G[i0, 2] + height - 1e-6) & (b[:, 2] >= G[i1, 2] + height - 1e-6)
+        # Both ends over the same ground point: its region is convex, so the leg stays in it.
+        # Only the other legs need the regions worked out.
+        todo = low[ok[low] & (i0 != i1)]
         if len(todo):
             ok[todo] = self._above_each_ground(p0[todo], p1[todo], height)
         return ok
@@ -341,6 +347,17 @@ class Site:
             z0, dz = P0[:, 2:3], (P1 - P0)[:, 2:3]
             lowest = np.minimum(z0 + lo * dz, z0 + hi * dz)  # lo, hi are within [0, 1]
             ok[s0:s0 + per] = ~(over & (lowest < G[None, :, 2] + height - 1e-6)).any(axis=1)
+        return ok
+
+    def above_ground(self, points: np.ndarray, height: float) -> np.ndarray:
+        """(N,) bool: each point is at least ``height`` above the ground under it (``ground_z``);
+        points above the site's highest ground need no lookup."""
+        P = np.atleast_2d(np.asarray(points, float))
+        G = self.ground_points
+        ok = P[:, 2] >= (G[:, 2].max() if len(G) else -np.inf) + height
+        low = np.nonzero(~ok)[0]
+        if len(low):
+            ok[low] = P[low, 2] >= self.ground_z(P[low]) + height
         return ok
 
     def ground_z(self, points: np.ndarray) -> np.ndarray:
