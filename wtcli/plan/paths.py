@@ -104,32 +104,20 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
     """
     p, q = np.asarray(p, float), np.asarray(q, float)
     cap = leg_required + 0.5 * LEG_STEP  # legs subtract up to half a step of sampling slack
-    if site.segment_clearance(p[None], q[None], LEG_STEP, cap)[0] >= leg_required and (
-            ground is None or site.legs_above_ground(p[None], q[None], ground)[0]):
+    clear = site.segment_clearance(p[None], q[None], LEG_STEP, cap)[0] >= leg_required
+    if clear and (ground is None or site.legs_above_ground(p[None], q[None], ground)[0]):
         return []
-    dirs = list(hints or [])
     m = 0.5 * (p + q)
-    for x in (m, p, q):  # escape directions from the turbine nearest each of these points
-        t = site.nearest_hub(x)
-        radial = x - t.hub_center
-        radial -= (radial @ t.axis) * t.axis
-        if np.linalg.norm(radial) > 1e-6:
-            dirs.append(_unit(radial))
-        out = np.r_[(x - t.base_xyz)[:2], 0.0]
-        if np.linalg.norm(out) > 1e-6:
-            dirs.append(_unit(out))
-        dirs += [t.axis, -t.axis]
-    t = site.nearest_hub(m)
-    dirs += [t.blade_direction(k) for k in range(t.n_blades)]  # around a blade's tip
     side = np.cross(Z, q - p)
-    if np.linalg.norm(side) > 1e-6:
-        dirs += [_unit(side), -_unit(side)]
-    dirs.append(Z)
-    uniq: list[np.ndarray] = []
-    for u in dirs:
-        if all(float(u @ v) < 0.999 for v in uniq):
-            uniq.append(u)
-    dirs = uniq
+    side = [_unit(side), -_unit(side)] if np.linalg.norm(side) > 1e-6 else []
+    dirs = _escapes(site, (m, p, q), list(hints or []), side)
+    # A long leg is often blocked far from its middle and ends (a turbine in line): vias pushed
+    # from its nearest point to what blocks it go round that with short pushes.
+    block: list[tuple[np.ndarray, list[np.ndarray]]] = []
+    tb = None if clear else site.lowest_sample(p, q, LEG_STEP, cap)
+    if tb is not None and min(tb, 1 - tb, abs(tb - 0.5)) * np.linalg.norm(q - p) > 20.0:
+        xb = p + tb * (q - p)
+        block = [(xb, _escapes(site, (xb,), [], side))]
     gp, gq = _away(site, p), _away(site, q)  # straight away from the nearest part
     # Between grounds of different heights, a chain whose vias drop below the higher end's
     # height may dip too low over the higher ground before leaving it: also try each two-via
@@ -144,6 +132,7 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
             [[q + dist * u] for u in dirs] + [[p + dist * u, q + dist * u] for u in dirs]
         cands += [[p + dist * gp, q + dist * gq]]
         cands += [[p + dist * gp, m + dist * u, q + dist * gq] for u in dirs]
+        cands += [[xb + dist * u] for xb, ub in block for u in ub]
         if lifted:
             cands += [[lift(p + dist * u), lift(q + dist * u)] for u in dirs]
         vp = np.array([v for c in cands for v in c])
@@ -178,6 +167,31 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
             if good.any():
                 return batch[int(np.argmax(good))]
     return None
+
+
+def _escapes(site: Site, points, first: list[np.ndarray], extra: list[np.ndarray]) -> list[np.ndarray]:
+    """Distinct unit directions to push a via point in: ``first``, away from the axis and from
+    the tower of the turbine nearest each point, along its axis both ways, round its blades'
+    tips (that of the first point), ``extra`` and up."""
+    dirs: list[np.ndarray] = list(first)
+    for x in points:
+        t = site.nearest_hub(x)
+        radial = x - t.hub_center
+        radial -= (radial @ t.axis) * t.axis
+        if np.linalg.norm(radial) > 1e-6:
+            dirs.append(_unit(radial))
+        out = np.r_[(x - t.base_xyz)[:2], 0.0]
+        if np.linalg.norm(out) > 1e-6:
+            dirs.append(_unit(out))
+        dirs += [t.axis, -t.axis]
+    t = site.nearest_hub(points[0])
+    dirs += [t.blade_direction(k) for k in range(t.n_blades)]  # around a blade's tip
+    dirs += extra + [Z]
+    uniq: list[np.ndarray] = []
+    for u in dirs:
+        if all(float(u @ v) < 0.999 for v in uniq):
+            uniq.append(u)
+    return uniq
 
 
 def _away(site: Site, x: np.ndarray, h: float = 0.25) -> np.ndarray:

@@ -250,6 +250,20 @@ class Site:
             np.minimum.at(out, seg, self.clearance(pts, cap))
         return out - 0.5 * length / n
 
+    def lowest_sample(self, p0: np.ndarray, p1: np.ndarray, step: float = 0.5,
+                      cap: float | None = None) -> float | None:
+        """Where (t in [0, 1]) the leg p0 -> p1's least-clearance sample of ``segment_clearance``
+        lies; None where no sample is near a turbine."""
+        p0, p1 = np.asarray(p0, float)[None], np.asarray(p1, float)[None]
+        cap = self.horizon if cap is None else min(cap, self.horizon)
+        n = np.maximum(1, np.ceil(np.linalg.norm(p1 - p0, axis=1) / step).astype(int))
+        _, j0, j1 = self._sample_ranges(p0, p1, n, self.cull_distance(cap))
+        if len(j0) == 0:
+            return None
+        j = np.concatenate([np.arange(a, b + 1) for a, b in zip(j0, j1)])
+        t = j / n[0]
+        return float(t[np.argmin(self.clearance(p0 + (p1 - p0) * t[:, None], cap))])
+
     def _sample_ranges(self, p0: np.ndarray, p1: np.ndarray, n: np.ndarray,
                        grow: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(leg, first, last sample index) of the stretches of each leg inside a turbine's box
