@@ -232,7 +232,7 @@ def real_photos(model, root: Path, log) -> dict:
         for ip in sorted((root / "images").glob("*")):
             items.append((ip, root / "masks" / (ip.stem + ".png"), ""))
     blade_iou, tower_iou, counts, counts0 = [], [], [], []
-    errors = []
+    errors, per_photo = [], []
     for ip, mp, view in items:
         img = cv2.imread(str(ip), cv2.IMREAD_COLOR)
         if mp is None or not mp.is_file():
@@ -252,6 +252,10 @@ def real_photos(model, root: Path, log) -> dict:
         tower = (pred.of("tower").union() | pred.of("nacelle").union()) if len(pred) else np.zeros(sem.shape, bool)
         blade_iou.append(mask_iou(blade, sem == 1))
         tower_iou.append(mask_iou(tower, sem == 2))
+        per_photo.append({"image": ip.name, "view": view, "blade_iou": round(blade_iou[-1], 4),
+                          "tower_iou": round(tower_iou[-1], 4),
+                          # predicted / true blade pixels: < 1 where blades come out too thin
+                          "blade_area_ratio": round(float(blade.sum()) / max(int((sem == 1).sum()), 1), 3)})
         if "front" in view.lower():
             from wtcli.pitch import pitch_from_instances
 
@@ -261,7 +265,13 @@ def real_photos(model, root: Path, log) -> dict:
                 except WtError:
                     out.append(0)
     log(f"  real photos: {len(blade_iou)} evaluated, {len(errors)} unreadable")
+    far = [r for r in per_photo if "distant" in r["view"].lower()]
+    near = [r for r in per_photo if "distant" not in r["view"].lower()]
     return {"photos": len(blade_iou), "unreadable": errors,
+            "blade_iou_distant": float(np.mean([r["blade_iou"] for r in far])) if far else None,
+            "blade_iou_not_distant": float(np.mean([r["blade_iou"] for r in near])) if near else None,
+            "distant_photos": len(far),
+            "per_photo": per_photo,
             "blade_iou": float(np.mean(blade_iou)) if blade_iou else None,
             "tower_iou": float(np.mean(tower_iou)) if tower_iou else None,
             "front_views": len(counts),
