@@ -51,7 +51,7 @@ from wtcli.masks import Instances  # noqa: E402
 from wtcli.segment.data import HELDOUT_SEED_BASE, image_tensor  # noqa: E402
 from wtcli.segment.evaluate import Evaluator, mask_iou  # noqa: E402
 from wtcli.pitch import CANDIDATE_FLOOR, DEFAULT_SCORE_THRESHOLD  # noqa: E402
-from wtcli.segment.infer import load_model, predict  # noqa: E402
+from wtcli.segment.infer import load_model, predict, second_look  # noqa: E402
 from wtcli.segment.model import resolve_weights  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -106,6 +106,7 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
     from wtcli.synth.render import render_sample
 
     ev = Evaluator(0.5)
+    zoom = {"ev": Evaluator(0.5), "right": 0, "errs": [], "by_fill": {"distant": [0, 0], "working": [0, 0]}}
     views: dict[str, int] = {}
     grounds: dict[str, int] = {}
     front_n = front_right = front_right0 = gt_right = 0
@@ -125,6 +126,9 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
         grounds[g] = grounds.get(g, 0) + 1
         pred = predict(model, s.image, score_threshold=0.0)
         ev.add(pred, s.instances)
+        # What segment_image gives (small turbines looked at again), from the candidate floor up.
+        zpred = second_look(model, s.image, pred[pred.scores >= CANDIDATE_FLOOR], CANDIDATE_FLOOR)
+        zoom["ev"].add(zpred, s.instances)
         if s.truth["view"] == "front":
             front_n += 1
             conf = pred[pred.scores >= 0.5] if len(pred) else pred
@@ -138,6 +142,12 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
             band[2] += k0 == s.truth["blades_visible"]
             errs += e
             errs0 += e0
+            kz, ez, _ = pitch_errors(completion_input(zpred), s.truth, completion=True)
+            zoom["right"] += kz == s.truth["blades_visible"]
+            zoom["errs"] += ez
+            zb = zoom["by_fill"]["distant" if s.truth["fill"] < FILL_WORKING else "working"]
+            zb[0] += 1
+            zb[1] += kz == s.truth["blades_visible"]
             adm_errs += ea
             k2, e2, _ = pitch_errors(s.instances, s.truth)
             gt_right += k2 == s.truth["blades_visible"]
@@ -145,7 +155,18 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
         if (i + 1) % 25 == 0:
             log(f"  {i + 1}/{n} images, {time.perf_counter() - t0:.0f} s")
     out = ev.summary()
+    zs = zoom["ev"].summary()
+    zs.update({
+        "detections_from": CANDIDATE_FLOOR,  # AP counts nothing below it (the plain figures: 0)
+        "front_right_blade_count": zoom["right"] / front_n if front_n else None,
+        "front_right_blade_count_by_fill": {k: (r / n if n else None) for k, (n, r) in zoom["by_fill"].items()},
+        "theta_error_mean_deg": float(np.mean(zoom["errs"])) if zoom["errs"] else None,
+        "theta_error_median_deg": float(np.median(zoom["errs"])) if zoom["errs"] else None,
+        "theta_error_p95_deg": float(np.percentile(zoom["errs"], 95)) if zoom["errs"] else None,
+        "theta_blades_measured": len(zoom["errs"]),
+    })
     out.update({
+        "zoom": zs,
         "n": done, "n_asked": n, "width": width, "height": height,
         "seeds": [HELDOUT_SEED_BASE, HELDOUT_SEED_BASE + done - 1],
         "views": views, "grounds": grounds,
@@ -188,8 +209,16 @@ def speed(model, runs: int, with_stock: bool) -> dict:
         return runs / (time.perf_counter() - t)
 
     ours = clock(lambda: predict(model, img, score_threshold=0.5))
+    # As segment_image runs it: the candidate floor, small turbines looked at again (this render
+    # and a distant one, several small turbines in view).
+    far = next(r.image for r in (render_sample(HELDOUT_SEED_BASE + 999_998 - k, width=1024, height=683,
+                                               view="front") for k in range(500))
+               if r.truth["fill"] < FILL_WORKING)
+    zoomed = {name: clock(lambda im=im: second_look(model, im, predict(model, im, CANDIDATE_FLOOR),
+                                                    CANDIDATE_FLOOR))
+              for name, im in (("this render", img), ("a distant render", far))}
     out = {"input": "1024x683 BGR render", "runs": runs, "threads": torch.get_num_threads(),
-           "ours_images_per_s": ours}
+           "ours_images_per_s": ours, "ours_with_zoom_images_per_s": zoomed}
     if with_stock:
         from torchvision.models.detection import maskrcnn_resnet50_fpn
 
@@ -233,6 +262,7 @@ def real_photos(model, root: Path, log) -> dict:
             items.append((ip, root / "masks" / (ip.stem + ".png"), ""))
     blade_iou, tower_iou, counts, counts0 = [], [], [], []
     errors, per_photo = [], []
+    zoom: dict[str, list] = {"blade_iou": [], "tower_iou": [], "counts": []}
     for ip, mp, view in items:
         img = cv2.imread(str(ip), cv2.IMREAD_COLOR)
         if mp is None or not mp.is_file():
@@ -252,14 +282,23 @@ def real_photos(model, root: Path, log) -> dict:
         tower = (pred.of("tower").union() | pred.of("nacelle").union()) if len(pred) else np.zeros(sem.shape, bool)
         blade_iou.append(mask_iou(blade, sem == 1))
         tower_iou.append(mask_iou(tower, sem == 2))
+        zlow = second_look(model, img, low, CANDIDATE_FLOOR)
+        zpred = zlow[zlow.scores >= 0.5] if len(zlow) else zlow
+        zblade = zpred.of("blade").union() if len(zpred) else np.zeros(sem.shape, bool)
+        ztower = (zpred.of("tower").union() | zpred.of("nacelle").union()) if len(zpred) else np.zeros(sem.shape, bool)
+        zoom["blade_iou"].append(mask_iou(zblade, sem == 1))
+        zoom["tower_iou"].append(mask_iou(ztower, sem == 2))
         per_photo.append({"image": ip.name, "view": view, "blade_iou": round(blade_iou[-1], 4),
                           "tower_iou": round(tower_iou[-1], 4),
+                          "zoom_blade_iou": round(zoom["blade_iou"][-1], 4),
+                          "zoom_tower_iou": round(zoom["tower_iou"][-1], 4),
                           # predicted / true blade pixels: < 1 where blades come out too thin
                           "blade_area_ratio": round(float(blade.sum()) / max(int((sem == 1).sum()), 1), 3)})
         if "front" in view.lower():
             from wtcli.pitch import pitch_from_instances
 
-            for out, inp in ((counts0, pred), (counts, completion_input(low))):
+            for out, inp in ((counts0, pred), (counts, completion_input(low)),
+                             (zoom["counts"], completion_input(zlow))):
                 try:
                     out.append(len(pitch_from_instances(inp, expected_blades=None).blades))
                 except WtError:
@@ -272,6 +311,12 @@ def real_photos(model, root: Path, log) -> dict:
             "blade_iou_not_distant": float(np.mean([r["blade_iou"] for r in near])) if near else None,
             "distant_photos": len(far),
             "per_photo": per_photo,
+            "zoom": {"blade_iou": float(np.mean(zoom["blade_iou"])) if zoom["blade_iou"] else None,
+                     "tower_iou": float(np.mean(zoom["tower_iou"])) if zoom["tower_iou"] else None,
+                     "blade_iou_distant": float(np.mean([r["zoom_blade_iou"] for r in far])) if far else None,
+                     "front_blade_counts": zoom["counts"],
+                     "front_blade_count_3": (sum(c == 3 for c in zoom["counts"]) / len(zoom["counts"]))
+                     if zoom["counts"] else None},
             "blade_iou": float(np.mean(blade_iou)) if blade_iou else None,
             "tower_iou": float(np.mean(tower_iou)) if tower_iou else None,
             "front_views": len(counts),

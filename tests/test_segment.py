@@ -425,3 +425,61 @@ def test_segment_folder_with_corrupt_non_image_and_huge_files(cli, photo_folder,
     assert (report["drone.jpg"]["width"], report["drone.jpg"]["height"]) == (5472, 3648)
     assert cv2.imread(str(out / "overlay" / "drone.png")).shape == (3648, 5472, 3)
     assert "3 of 6 images failed" in res.stderr
+
+
+# ---- second look at small turbines -----------------------------------------------------------
+def test_turbine_groups_join_touching_boxes_only():
+    boxes = np.array([[10, 10, 20, 60], [18, 5, 40, 12], [100, 100, 110, 110],
+                      [41, 11, 50, 20], [300, 300, 310, 310]], float)
+    groups = sorted(sorted(g.tolist()) for g in infer._turbine_groups(boxes))
+    assert groups == [[0, 1, 3], [2], [4]]
+
+
+def test_second_look_recrops_a_small_turbine_and_pastes_it_back(monkeypatch):
+    """A distant turbine (first-pass blade and tower, 40 px in a 300 x 400 photo) is segmented
+    again on a crop with the photo's aspect around it; the crop's instances replace it, at the
+    right place; one cut by the crop's edge and one off the turbine are dropped; a large
+    turbine is left as it was."""
+    H, W = 300, 400
+    first = np.zeros((3, H, W), bool)
+    first[0, 100:120, 200:203] = True  # a small turbine: a thin blade ...
+    first[1, 120:140, 200:204] = True  # ... and its tower
+    first[2, 10:290, 20:60] = True  # a large turbine's tower, left alone
+    inst = Instances(np.array(["blade", "tower", "tower"], object), first, np.array([0.9, 0.8, 0.95]))
+    crops = []
+
+    def fake_predict(model, image, score_threshold=0.5, max_size=None):
+        h, w = image.shape[:2]
+        crops.append((h, w))
+        m = np.zeros((3, h, w), bool)
+        m[0, h // 2 - 30:h // 2, w // 2 - 4:w // 2 + 4] = True  # a fuller blade
+        m[1, h // 2:h - 10, w // 2 - 3:w // 2 + 3] = True  # the tower
+        m[2, 0:5, 0:5] = True  # something cut by the crop's top-left edge
+        m = np.concatenate([m, np.zeros((1, h, w), bool)])
+        m[3, h - 9:h - 4, 3:8] = True  # whole in the crop, but off this turbine: a neighbour's
+        return Instances(np.array(["blade", "tower", "blade", "nacelle"], object), m,
+                         np.array([0.97, 0.9, 0.99, 0.8]))
+
+    monkeypatch.setattr(infer, "predict", fake_predict)
+    out = infer.second_look(object(), np.zeros((H, W, 3), np.uint8), inst, 0.2)
+    assert len(crops) == 1
+    h, w = crops[0]
+    assert abs(w / h - W / H) < 0.02 and 80 <= h <= 120  # (40 px + 2 x 0.6 x 40) at the photo's aspect
+    assert sorted(out.labels.tolist()) == ["blade", "tower", "tower"]
+    assert np.array_equal(out.masks[out.scores == 0.95][0], first[2])
+    blade = out.masks[out.labels == "blade"][0]
+    ys, xs = np.nonzero(blade)
+    assert blade.sum() == 30 * 8 and abs(xs.mean() - 201.5) < 3 and 88 <= ys.mean() <= 122
+    assert out.boxes[out.labels == "blade"][0][0] == xs.min()
+
+
+def test_second_look_leaves_large_turbines_alone(monkeypatch):
+    def fail(*a, **k):
+        raise AssertionError("no crop expected")
+
+    monkeypatch.setattr(infer, "predict", fail)
+    m = np.zeros((2, 100, 100), bool)
+    m[0, 5:90, 48:52] = True
+    m[1, 40:45, 10:90] = True
+    inst = Instances(np.array(["tower", "blade"], object), m, np.array([0.9, 0.8]))
+    assert infer.second_look(object(), np.zeros((100, 100, 3), np.uint8), inst, 0.5) is inst

@@ -20,6 +20,9 @@ def segment(
     max_size: int = typer.Option(1600, "--max-size", min=64,
                                  help="Downscale larger photos to this long side for inference; "
                                       "masks are scaled back to the photo's size."),
+    zoom: bool = typer.Option(True, "--zoom/--no-zoom",
+                              help="Segment each small (distant) turbine again on a crop around "
+                                   "it: its blades come out fuller and its angles truer."),
     device: str = typer.Option("auto", "--device", help="auto (GPU if present) | cpu | cuda[:N]."),
     model: Optional[Path] = typer.Option(None, "--model", "-m",
                                          help="Weights file (default: models/wtseg-r18s.pt)."),
@@ -35,7 +38,7 @@ def segment(
     from wtcli.errors import InputError, PartialFailure
     from wtcli.jsonio import dumps
     from wtcli.segment.batch import find_images, segment_paths, write_batch_files
-    from wtcli.segment.infer import load_model, predict
+    from wtcli.segment.infer import load_model, predict, second_look
     from wtcli.segment.model import resolve_weights
 
     if out.exists() and not out.is_dir():
@@ -45,7 +48,8 @@ def segment(
     net = load_model(weights, device)
 
     def run(img):
-        return predict(net, img, score_threshold=score_threshold, max_size=max_size)
+        inst = predict(net, img, score_threshold=score_threshold, max_size=max_size)
+        return second_look(net, img, inst, score_threshold, max_size) if zoom else inst
 
     with make_progress() as progress:
         task = progress.add_task("segment", total=len(files), status="")
@@ -54,7 +58,8 @@ def segment(
             progress.update(task, advance=1, status=f"{res.rel} {res.status}")
 
         results = segment_paths(path, out, run, recursive=recursive, resume=resume, on_progress=step)
-    settings = {"score_threshold": score_threshold, "max_size": max_size, "model": str(weights),
+    settings = {"score_threshold": score_threshold, "max_size": max_size, "zoom": zoom,
+                "model": str(weights),
                 "device": str(next(net.parameters()).device)}
     report = write_batch_files(out, results, settings)
 

@@ -26,6 +26,11 @@ DEFAULT_MAX_SIZE = 1600
 DEFAULT_SCORE_THRESHOLD = 0.5
 MASK_OFFSET_PX = 0.5  # see paste_mask; weights trained with area-resized masks
 DUPLICATE_INSIDE = 0.3  # a blade this much inside a better-scored blade is the same blade
+# Second look (``second_look``): a turbine whose detections span less than this share of the
+# frame is segmented again on a crop around it, padded by ZOOM_PAD of its size on each side.
+SMALL_TURBINE = 0.5
+ZOOM_PAD = 0.6
+ZOOM_MAX = 3  # the largest this many small turbines (each look costs a pass of the network)
 
 _CACHE: dict[tuple, torch.nn.Module] = {}
 _LOCK = threading.Lock()
@@ -172,10 +177,86 @@ def paste_mask(out: np.ndarray, soft: np.ndarray, box, sx: float, sy: float,
     out[Y0:Y1, X0:X1] |= region >= 0.5
 
 
+def _turbine_groups(boxes: np.ndarray, grow: float = 0.25) -> list[np.ndarray]:
+    """Indices of the detections of each turbine: boxes that overlap once each is grown by
+    ``grow`` of its size per side (blades meet at the hub, the tower under the nacelle)."""
+    w = (boxes[:, 2] - boxes[:, 0]) * grow
+    h = (boxes[:, 3] - boxes[:, 1]) * grow
+    lo, hi = boxes[:, :2] - np.c_[w, h], boxes[:, 2:] + np.c_[w, h]
+    touch = ((lo[:, None] <= hi[None]) & (lo[None] <= hi[:, None])).all(axis=2)
+    group = np.arange(len(boxes))
+    for _ in range(len(boxes)):  # label propagation: each takes the least label it touches
+        new = np.where(touch, group[None, :], len(boxes)).min(axis=1)
+        if (new == group).all():
+            break
+        group = new
+    return [np.nonzero(group == g)[0] for g in np.unique(group)]
+
+
+def second_look(model: torch.nn.Module, image_bgr: np.ndarray, inst: Instances,
+                score_threshold: float, max_size: int | None = DEFAULT_MAX_SIZE) -> Instances:
+    """Segment each small turbine again on a crop around it, and use those instances instead.
+
+    The network works at 480 px high: a distant turbine's blades are then 1-3 px wide and come
+    out too thin, or not at all. Cropped with its surroundings (ZOOM_PAD of its size each side,
+    the frame's aspect), it fills the network's view as in training (figures: docs/segment.md).
+    The crop's detections that meet the turbine's box replace the first pass's of it, except
+    those cut by the crop's edge (not the photo's); ZOOM_MAX largest small turbines are looked
+    at again."""
+    if not len(inst):
+        return inst
+    img = np.asarray(image_bgr)
+    H, W = img.shape[:2]
+    keep = np.ones(len(inst), bool)
+    found: list[Instances] = []
+    where: list[tuple[int, int]] = []
+    small = []
+    for g in _turbine_groups(inst.boxes):
+        x0, y0 = inst.boxes[g, :2].min(axis=0)
+        x1, y1 = inst.boxes[g, 2:].max(axis=0)
+        if max((y1 - y0) / H, (x1 - x0) / W) < SMALL_TURBINE:
+            small.append((-(y1 - y0) * (x1 - x0), g, x0, y0, x1, y1))
+    small.sort(key=lambda c: c[0])
+    for _, g, x0, y0, x1, y1 in small[:ZOOM_MAX]:
+        ch = max(y1 - y0, (x1 - x0) * H / W) * (1 + 2 * ZOOM_PAD)
+        if ch >= 0.8 * H or ch < 16:  # hardly a closer look, or nothing to look at
+            continue
+        cw = ch * W / H
+        X0 = int(round(np.clip((x0 + x1 - cw) / 2, 0, W - cw)))
+        Y0 = int(round(np.clip((y0 + y1 - ch) / 2, 0, H - ch)))
+        X1, Y1 = min(W, X0 + int(round(cw))), min(H, Y0 + int(round(ch)))
+        sub = predict(model, img[Y0:Y1, X0:X1], score_threshold, max_size)
+        b = sub.boxes
+        cut = (((b[:, 0] <= 1) & (X0 > 0)) | ((b[:, 1] <= 1) & (Y0 > 0))
+               | ((b[:, 2] >= X1 - X0 - 1) & (X1 < W)) | ((b[:, 3] >= Y1 - Y0 - 1) & (Y1 < H)))
+        # Only this turbine's: a detection meeting its box (a blade missed before starts at
+        # its hub); a neighbour in the crop keeps its own detections.
+        b = b + (X0, Y0, X0, Y0)
+        mine = (b[:, 0] <= x1) & (b[:, 2] >= x0) & (b[:, 1] <= y1) & (b[:, 3] >= y0)
+        keep[g] = False
+        found.append(sub[~cut & mine])
+        where.append((X0, Y0))
+    if not found:
+        return inst
+    labels, masks, scores, boxes = [inst.labels[keep]], [inst.masks[keep]], [inst.scores[keep]], [inst.boxes[keep]]
+    for sub, (X0, Y0) in zip(found, where):
+        h, w = sub.image_size
+        m = np.zeros((len(sub), H, W), bool)
+        m[:, Y0:Y0 + h, X0:X0 + w] = sub.masks
+        labels.append(sub.labels)
+        masks.append(m)
+        scores.append(sub.scores)
+        boxes.append(sub.boxes.reshape(-1, 4) + (X0, Y0, X0, Y0))
+    scores_a = np.concatenate(scores)
+    order = np.argsort(-scores_a, kind="stable")  # as predict's: best first
+    return drop_duplicate_blades(Instances(np.concatenate(labels)[order], np.concatenate(masks)[order],
+                                           scores_a[order], np.concatenate(boxes)[order]))
+
+
 def segment_image(image_bgr: np.ndarray, model: torch.nn.Module | None = None,
                   score_threshold: float = DEFAULT_SCORE_THRESHOLD, max_size: int | None = DEFAULT_MAX_SIZE,
                   device: str | None = None, weights: str | Path | None = None,
-                  candidate_floor: float | None = CANDIDATE_FLOOR) -> Instances:
+                  candidate_floor: float | None = CANDIDATE_FLOOR, zoom: bool = True) -> Instances:
     """The one call other stages use: segment a BGR photo with the shipped model (loaded lazily
     and cached) or the ``model`` given.
 
@@ -183,13 +264,16 @@ def segment_image(image_bgr: np.ndarray, model: torch.nn.Module | None = None,
     ``candidate_floor`` (default 0.2; None: none): those are rotor-completion candidates for
     ``wtcli.pitch.pitch_from_instances``, which counts only what scores ``score_threshold``
     (give it the same one). ``inst[inst.scores >= score_threshold]`` is the segmentation alone;
-    it is the same as predicting at that threshold (duplicates are dropped greedily by score)."""
+    without ``zoom`` it is the same as predicting at that threshold (duplicates are dropped
+    greedily by score). ``zoom``: small turbines get a ``second_look`` (at the lower threshold,
+    as ``segment --score-threshold 0.2`` does, so files chain to the same result)."""
     if model is None:
         model = load_model(weights, device)
-    if candidate_floor is None or candidate_floor >= score_threshold:
-        return predict(model, image_bgr, score_threshold, max_size)
-    inst = predict(model, image_bgr, candidate_floor, max_size)
-    if not len(inst):
+    floor = score_threshold if candidate_floor is None else min(candidate_floor, score_threshold)
+    inst = predict(model, image_bgr, floor, max_size)
+    if zoom:
+        inst = second_look(model, image_bgr, inst, floor, max_size)
+    if not len(inst) or floor >= score_threshold:
         return inst
     return inst[(inst.scores >= score_threshold) | (inst.labels == "blade")]
 
