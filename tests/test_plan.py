@@ -865,6 +865,33 @@ def test_return_from_higher_ground_past_a_turbine_holds_its_height():
         assert min(t.clearance(X).min() for t in ts) >= 4.55
 
 
+def test_return_over_a_higher_base_between_two_lower_ones_climbs_over_its_ground():
+    """From the foot of T3's tower (5.5 m above its ground) back to the launch point, over T2's
+    base 6-9 m higher than both ends: a chain held at the ends' height stays too low over T2's
+    ground (property suite, seed 10 394: was refused)."""
+    from wtcli.plan.paths import connect
+    from wtcli.plan.safety import Site
+
+    ts = (make_turbine(az=0.0, yaw=342.3, tid="T1", base=(0.0, -8.3, 1.9), hub_height=117.0,
+                       rotor_diameter=145.0),
+          make_turbine(az=0.0, yaw=125.4, tid="T2", base=(454.7, 48.2, 10.6), hub_height=107.7,
+                       rotor_diameter=117.4),
+          make_turbine(az=0.0, yaw=191.9, tid="T3", base=(692.1, 30.8, 4.6), hub_height=105.4,
+                       rotor_diameter=100.0))
+    launch = np.array([-26.57, 75.01, 1.92])
+    site = Site(ts, launch=launch)
+    p, q = np.array([700.66, 31.68, 10.15]), launch + (0.0, 0.0, 10.0)
+    vias = connect(site, p, q, 5.46, ground=5.0)
+    assert vias is not None
+    chain = np.array([p] + list(vias) + [q])
+    G = np.array([t.base for t in ts] + [launch], float)
+    for a, b in zip(chain[:-1], chain[1:]):
+        X = a + (b - a) * np.linspace(0, 1, int(np.linalg.norm(b - a) / 0.05) + 2)[:, None]
+        g = G[np.argmin(np.linalg.norm(X[:, None, :2] - G[None, :, :2], axis=2), axis=1), 2]
+        assert (X[:, 2] >= g + 5.0 - 1e-6).all()
+        assert min(t.clearance(X).min() for t in ts) >= 5.46
+
+
 def test_long_leg_goes_round_a_tower_in_line_where_it_stands():
     """A 1 km transit with a tower 300 m along it: the detour bends at the tower (a few cm
     longer), not 7 m sideways over the whole length (14 m longer, as the search from the

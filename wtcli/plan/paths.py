@@ -120,10 +120,14 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
         block = [(xb, _escapes(site, (xb,), [], side))]
     gp, gq = _away(site, p), _away(site, q)  # straight away from the nearest part
     # Between grounds of different heights, a chain whose vias drop below the higher end's
-    # height may dip too low over the higher ground before leaving it: also try each two-via
+    # height, or below higher ground on the way, may dip too low over it: also try each two-via
     # chain with its vias lifted to that height (hold it, then descend at the far end).
     zc = max(p[2], q[2])
-    lifted = ground is not None and site.ground_z(p[None])[0] != site.ground_z(q[None])[0]
+    lifted = False
+    if ground is not None:
+        g = site.ground_z(p + (q - p) * np.linspace(0.0, 1.0, 65)[:, None])  # where to lift to
+        lifted = bool(g.max() > g.min())
+        zc = max(zc, float(g.max()) + ground + 0.5)
 
     def lift(v: np.ndarray) -> np.ndarray:
         return np.r_[v[:2], max(v[2], zc)]
