@@ -832,6 +832,17 @@ def test_legs_above_ground_is_exact_against_dense_sampling():
         assert 10 < got.sum() < 90  # both answers occur
 
 
+def _assert_chain_clear(ts, launch, chain, need: float, ground: float) -> None:
+    """Every 5 cm of every leg of ``chain``: ``need`` from every turbine and ``ground`` above
+    the nearest base or launch point's height."""
+    G = np.array([t.base for t in ts] + [launch], float)
+    for a, b in zip(chain[:-1], chain[1:]):
+        X = a + (b - a) * np.linspace(0, 1, int(np.linalg.norm(b - a) / 0.05) + 2)[:, None]
+        g = G[np.argmin(np.linalg.norm(X[:, None, :2] - G[None, :, :2], axis=2), axis=1), 2]
+        assert (X[:, 2] >= g + ground - 1e-6).all()
+        assert min(t.clearance(X).min() for t in ts) >= need
+
+
 def _stepped_row():
     """A row down a slope: T3 on ground 16 m above the launch point, T2 in line between them
     (from the property suite, seed 10 335)."""
@@ -856,13 +867,7 @@ def test_return_from_higher_ground_past_a_turbine_holds_its_height():
     p, q = np.array([540.16, -12.26, 23.92]), launch + (0.0, 0.0, 10.0)
     vias = connect(site, p, q, 4.55, ground=5.0)
     assert vias is not None
-    chain = np.array([p] + list(vias) + [q])
-    G = np.array([t.base for t in ts] + [launch], float)
-    for a, b in zip(chain[:-1], chain[1:]):
-        X = a + (b - a) * np.linspace(0, 1, int(np.linalg.norm(b - a) / 0.05) + 2)[:, None]
-        g = G[np.argmin(np.linalg.norm(X[:, None, :2] - G[None, :, :2], axis=2), axis=1), 2]
-        assert (X[:, 2] >= g + 5.0 - 1e-6).all()
-        assert min(t.clearance(X).min() for t in ts) >= 4.55
+    _assert_chain_clear(ts, launch, np.array([p] + list(vias) + [q]), 4.55, 5.0)
 
 
 def test_return_over_a_higher_base_between_two_lower_ones_climbs_over_its_ground():
@@ -883,13 +888,7 @@ def test_return_over_a_higher_base_between_two_lower_ones_climbs_over_its_ground
     p, q = np.array([700.66, 31.68, 10.15]), launch + (0.0, 0.0, 10.0)
     vias = connect(site, p, q, 5.46, ground=5.0)
     assert vias is not None
-    chain = np.array([p] + list(vias) + [q])
-    G = np.array([t.base for t in ts] + [launch], float)
-    for a, b in zip(chain[:-1], chain[1:]):
-        X = a + (b - a) * np.linspace(0, 1, int(np.linalg.norm(b - a) / 0.05) + 2)[:, None]
-        g = G[np.argmin(np.linalg.norm(X[:, None, :2] - G[None, :, :2], axis=2), axis=1), 2]
-        assert (X[:, 2] >= g + 5.0 - 1e-6).all()
-        assert min(t.clearance(X).min() for t in ts) >= 5.46
+    _assert_chain_clear(ts, launch, np.array([p] + list(vias) + [q]), 5.46, 5.0)
 
 
 def test_long_leg_goes_round_a_tower_in_line_where_it_stands():

@@ -98,9 +98,11 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
             hints: list[np.ndarray] | None = None, ground: float | None = None) -> list[np.ndarray] | None:
     """Via points (possibly none) so that p -> vias -> q keeps ``leg_required`` from everything.
 
-    Tries the straight leg, then one via point pushed from the midpoint, then two via points
-    pushed from p and q, along the hint directions by growing distances (all candidates checked
-    in one vectorised call; the first, i.e. shortest push, that clears wins). None if none does.
+    Tries the straight leg, then one via point pushed from the midpoint (or from where a long
+    leg is blocked), from p or from q, then two via points pushed from p and q (also held at
+    the height of the higher end or ground between uneven grounds), along the hint and escape
+    directions by growing distances (a distance's candidates checked together, shortest chain
+    first; the first that clears wins). None if none does.
     """
     p, q = np.asarray(p, float), np.asarray(q, float)
     cap = leg_required + 0.5 * LEG_STEP  # legs subtract up to half a step of sampling slack
@@ -112,7 +114,7 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
     side = [_unit(side), -_unit(side)] if np.linalg.norm(side) > 1e-6 else []
     dirs = _escapes(site, (m, p, q), list(hints or []), side)
     # A long leg is often blocked far from its middle and ends (a turbine in line): vias pushed
-    # from its nearest point to what blocks it go round that with short pushes.
+    # from its least-clearance sample go round what blocks it with short pushes.
     block: list[tuple[np.ndarray, list[np.ndarray]]] = []
     tb = None if clear else site.lowest_sample(p, q, LEG_STEP, cap)
     if tb is not None and min(tb, 1 - tb, abs(tb - 0.5)) * np.linalg.norm(q - p) > 20.0:
