@@ -483,3 +483,11 @@ def test_second_look_leaves_large_turbines_alone(monkeypatch):
     m[1, 40:45, 10:90] = True
     inst = Instances(np.array(["tower", "blade"], object), m, np.array([0.9, 0.8]))
     assert infer.second_look(object(), np.zeros((100, 100, 3), np.uint8), inst, 0.5) is inst
+
+
+def test_second_look_that_finds_nothing_keeps_the_first_pass(monkeypatch):
+    monkeypatch.setattr(infer, "predict", lambda model, image, *a, **k: Instances.empty(*image.shape[:2]))
+    m = np.zeros((1, 300, 400), bool)
+    m[0, 100:130, 200:203] = True
+    inst = Instances(np.array(["blade"], object), m, np.array([0.9]))
+    assert infer.second_look(object(), np.zeros((300, 400, 3), np.uint8), inst, 0.2) is inst

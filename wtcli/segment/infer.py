@@ -201,15 +201,13 @@ def second_look(model: torch.nn.Module, image_bgr: np.ndarray, inst: Instances,
     out too thin, or not at all. Cropped with its surroundings (ZOOM_PAD of its size each side,
     the frame's aspect), it fills the network's view as in training (figures: docs/segment.md).
     The crop's detections that meet the turbine's box replace the first pass's of it, except
-    those cut by the crop's edge (not the photo's); ZOOM_MAX largest small turbines are looked
-    at again."""
+    those cut by the crop's edge (not the photo's); if none is left, the first pass's stand.
+    The ZOOM_MAX largest small turbines are looked at again."""
     if not len(inst):
         return inst
     img = np.asarray(image_bgr)
     H, W = img.shape[:2]
     keep = np.ones(len(inst), bool)
-    found: list[Instances] = []
-    where: list[tuple[int, int]] = []
     small = []
     for g in _turbine_groups(inst.boxes):
         x0, y0 = inst.boxes[g, :2].min(axis=0)
@@ -217,6 +215,7 @@ def second_look(model: torch.nn.Module, image_bgr: np.ndarray, inst: Instances,
         if max((y1 - y0) / H, (x1 - x0) / W) < SMALL_TURBINE:
             small.append((-(y1 - y0) * (x1 - x0), g, x0, y0, x1, y1))
     small.sort(key=lambda c: c[0])
+    labels, masks, scores, boxes = [], [], [], []
     for _, g, x0, y0, x1, y1 in small[:ZOOM_MAX]:
         ch = max(y1 - y0, (x1 - x0) * H / W) * (1 + 2 * ZOOM_PAD)
         if ch >= 0.8 * H or ch < 16:  # hardly a closer look, or nothing to look at
@@ -232,21 +231,20 @@ def second_look(model: torch.nn.Module, image_bgr: np.ndarray, inst: Instances,
         # Only this turbine's: a detection meeting its box (a blade missed before starts at
         # its hub); a neighbour in the crop keeps its own detections.
         b = b + (X0, Y0, X0, Y0)
-        mine = (b[:, 0] <= x1) & (b[:, 2] >= x0) & (b[:, 1] <= y1) & (b[:, 3] >= y0)
+        mine = ~cut & (b[:, 0] <= x1) & (b[:, 2] >= x0) & (b[:, 1] <= y1) & (b[:, 3] >= y0)
+        if not mine.any():  # the closer look found nothing of it: the first look stands
+            continue
         keep[g] = False
-        found.append(sub[~cut & mine])
-        where.append((X0, Y0))
-    if not found:
-        return inst
-    labels, masks, scores, boxes = [inst.labels[keep]], [inst.masks[keep]], [inst.scores[keep]], [inst.boxes[keep]]
-    for sub, (X0, Y0) in zip(found, where):
-        h, w = sub.image_size
-        m = np.zeros((len(sub), H, W), bool)
-        m[:, Y0:Y0 + h, X0:X0 + w] = sub.masks
-        labels.append(sub.labels)
+        m = np.zeros((int(mine.sum()), H, W), bool)
+        m[:, Y0:Y1, X0:X1] = sub.masks[mine]
+        labels.append(sub.labels[mine])
         masks.append(m)
-        scores.append(sub.scores)
-        boxes.append(sub.boxes.reshape(-1, 4) + (X0, Y0, X0, Y0))
+        scores.append(sub.scores[mine])
+        boxes.append(b[mine])
+    if not labels:
+        return inst
+    labels, masks = [inst.labels[keep]] + labels, [inst.masks[keep]] + masks
+    scores, boxes = [inst.scores[keep]] + scores, [inst.boxes[keep]] + boxes
     scores_a = np.concatenate(scores)
     order = np.argsort(-scores_a, kind="stable")  # as predict's: best first
     return drop_duplicate_blades(Instances(np.concatenate(labels)[order], np.concatenate(masks)[order],
