@@ -1,12 +1,13 @@
 """Predicted coverage per blade side over random single turbines, and why samples are missed.
 
     python benchmarks/plan_coverage.py [--cases 20] [--seed 11] [--spacing 0.5] [--why]
-                                       [--out results.json]
+                                       [--gimbal-max 30] [--out results.json]
 
 Random turbines: rotor azimuth 0-120 deg, yaw 0-360 deg, rotor diameter 90/120/150 m, hub height
 R + 15..45 m; default mission settings (safe distance 3 m + 1 m tracking margin, 1.5 mm/px) with
 ``min_side_coverage: 0`` so that no plan is refused for coverage. Coverage is the planner's own
-prediction (``summary.predicted_coverage``, the one coverage measure).
+prediction (``summary.predicted_coverage``, the one coverage measure). ``--gimbal-max``: the
+gimbal's upward pitch limit (default 90: it looks straight up; an under-slung gimbal stops near 30).
 
 ``--why`` explains every missed blade sample with one reason, the first that applies:
 
@@ -14,6 +15,8 @@ prediction (``summary.predicted_coverage``, the one coverage measure).
   can see it;
 - ``no_safe_view``: no camera position within ``max_incidence_deg`` of its normal and within the
   GSD distance keeps the planner's clearance (safe distance + margin) from every part;
+- ``gimbal``: such positions exist, but from none of them can the gimbal aim at the sample
+  (it would have to look up more than ``--gimbal-max``);
 - ``occluded_only``: such positions exist but from every one another part (or the blade itself)
   is in the way (``Turbine.line_of_sight``, the coverage measure's own test);
 - ``planner``: a safe, clear view exists; the planner's photos miss it (the fixable kind).
@@ -34,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from wtcli.errors import PlanError  # noqa: E402
 from wtcli.geometry import BLADE_SIDES, Camera, Turbine  # noqa: E402
-from wtcli.plan.config import Mission, Settings  # noqa: E402
+from wtcli.plan.config import Fleet, Mission, Settings  # noqa: E402
 from wtcli.plan.mission import _photos_of, pass_params, plan_mission  # noqa: E402
 from wtcli.geometry.coverage import measure_coverage  # noqa: E402
 from wtcli.plan.safety import Site  # noqa: E402
@@ -64,7 +67,8 @@ def _view_directions(normal: np.ndarray, max_deg: float) -> np.ndarray:
 
 
 def why_missed(t: Turbine, site: Site, samples, missed: np.ndarray, required: float,
-               near: float, far: float, max_inc: float, min_alt: float) -> list[str]:
+               near: float, far: float, max_inc: float, min_alt: float,
+               gimbal_max: float = 90.0) -> list[str]:
     parts = t.part_names()
     out = []
     for i in missed:
@@ -80,20 +84,28 @@ def why_missed(t: Turbine, site: Site, samples, missed: np.ndarray, required: fl
         if not ok.any():
             out.append("no_safe_view")
             continue
+        # The camera looks from C back at x, along -U: up by asin(-U_z).
+        up = np.degrees(np.arcsin(np.clip(-np.repeat(U[:, 2], len(R)), -1.0, 1.0)))
+        ok &= up <= gimbal_max + 1e-6
+        if not ok.any():
+            out.append("gimbal")
+            continue
         C = C[ok]
         clear = t.line_of_sight(C, np.tile(x, (len(C), 1)))
         out.append("planner" if clear.any() else "occluded_only")
     return out
 
 
-def run(cases: int, seed: int, why: bool, spacing: float = Settings().coverage_spacing_m) -> dict:
+def run(cases: int, seed: int, why: bool, spacing: float = Settings().coverage_spacing_m,
+        gimbal_max: float = 90.0) -> dict:
     rng = np.random.default_rng(seed)
     rows, refused = [], []
     reasons: Counter = Counter()
     miss_where: Counter = Counter()
     for c in range(cases):
         t = random_turbine(rng)
-        m = Mission((t,), CAM, settings=Settings(min_side_coverage=0.0, coverage_spacing_m=spacing))
+        m = Mission((t,), CAM, fleet=Fleet(gimbal_pitch_max_deg=gimbal_max),
+                    settings=Settings(min_side_coverage=0.0, coverage_spacing_m=spacing))
         t0 = time.perf_counter()
         try:
             plan = plan_mission(m)
@@ -114,6 +126,8 @@ def run(cases: int, seed: int, why: bool, spacing: float = Settings().coverage_s
                "worst": f"{worst_b}/{worst_s}", "by_blade_side": sides, "seconds": dt,
                "photos": s["photos"], "length_m": s["total_length_m"],
                "min_clearance_m": s["min_clearance_m"],
+               "max_photo_pitch_deg": max(float(r.gimbal_pitch_deg[r.photo].max())
+                                          for r in plan.routes if r.photo.any()),
                "violations": sum(s["violations"].values())}
         extra = ""
         if why:
@@ -124,7 +138,8 @@ def run(cases: int, seed: int, why: bool, spacing: float = Settings().coverage_s
             cv = measure_coverage(smp, CAM, pos, rot, gsd, st.max_incidence_deg)
             missed = np.nonzero(~cv.covered)[0]
             rs = why_missed(t, Site([t]), smp, missed, pp.required, pp.min_standoff,
-                            CAM.distance_for_gsd(gsd * 1.05), st.max_incidence_deg, st.min_altitude_m)
+                            CAM.distance_for_gsd(gsd * 1.05), st.max_incidence_deg, st.min_altitude_m,
+                            gimbal_max)
             area = Counter()
             for i, r in zip(missed, rs):
                 area[r] += float(smp.area[i])
@@ -153,6 +168,8 @@ def run(cases: int, seed: int, why: bool, spacing: float = Settings().coverage_s
         "per_side_mean": {k: float(np.mean(v)) for k, v in per_side.items() if v},
         "per_side_min": {k: float(np.min(v)) for k, v in per_side.items() if v},
         "worst_side_count": dict(Counter(r["worst"].split("/")[1] for r in rows)),
+        "gimbal_pitch_max_deg": gimbal_max,
+        "max_photo_pitch_deg": float(max(r["max_photo_pitch_deg"] for r in rows)) if rows else None,
         "violations": int(sum(r["violations"] for r in rows)),
         "min_clearance_m": float(min(r["min_clearance_m"] for r in rows)) if rows else None,
         "seconds_mean": float(np.mean([r["seconds"] for r in rows])) if rows else None,
@@ -172,9 +189,11 @@ def main() -> None:
     ap.add_argument("--why", action="store_true", help="explain every missed blade sample")
     ap.add_argument("--spacing", type=float, default=Settings().coverage_spacing_m,
                     help="coverage_spacing_m (m); default: the planner's")
+    ap.add_argument("--gimbal-max", type=float, default=90.0,
+                    help="the gimbal's upward pitch limit, deg (fleet.gimbal_pitch_max_deg)")
     ap.add_argument("--out", default=None)
     a = ap.parse_args()
-    res = run(a.cases, a.seed, a.why, a.spacing)
+    res = run(a.cases, a.seed, a.why, a.spacing, a.gimbal_max)
     print(json.dumps(res["summary"], indent=1))
     if a.out:
         Path(a.out).write_text(json.dumps(res, indent=1))

@@ -1,7 +1,8 @@
 """The plan's clearance guarantee over many random cases (the slow half of tests/test_plan.py).
 
 Random sites: 1-3 turbines (rotor radius 20-75 m, any yaw, stop angle and blade pitch 60-90),
-1-3 UAVs, safe distance 2.5-6 m, tracking margin 0-1.5 m, target GSD 1.2-2.5 mm/px. Every plan is
+1-3 UAVs, safe distance 2.5-6 m, tracking margin 0-1.5 m, target GSD 1.2-2.5 mm/px, a third with a
+gimbal that looks up at most 20-60 deg (``random_case(..., gimbal=True)``). Every plan is
 checked independently with the one turbine model: Turbine.clearance on every waypoint and
 Turbine.segment_clearance on every leg, against every turbine.
 
@@ -31,7 +32,7 @@ def one(seed: int) -> dict:
     from wtcli.errors import PlanError
     from wtcli.plan.mission import plan_mission
 
-    case = random_case(np.random.default_rng(seed))
+    case = random_case(np.random.default_rng(seed), gimbal=True)
     try:
         plan = plan_mission(case)
     except PlanError as e:
@@ -42,8 +43,11 @@ def one(seed: int) -> dict:
         for t in plan.turbines:
             worst = min(worst, float(t.clearance(r.pos).min()),
                         float(t.segment_clearance(r.pos[:-1], r.pos[1:], step=0.5).min()))
-    return {"seed": seed, "margin_m": worst - safe, "violation": bool(worst < safe),
-            "turbines": len(case.turbines), "uavs": len(case.fleet.uavs)}
+    up = case.fleet.gimbal_pitch_max_deg
+    aim_ok = all(float(r.gimbal_pitch_deg.max()) <= up + 1e-9 for r in plan.routes)
+    return {"seed": seed, "margin_m": worst - safe, "violation": bool(worst < safe) or not aim_ok,
+            "aim_ok": aim_ok, "gimbal_up_deg": up, "turbines": len(case.turbines),
+            "uavs": len(case.fleet.uavs)}
 
 
 def refusal_kind(message: str) -> str:
@@ -73,6 +77,8 @@ def main() -> None:
     errs = [r for r in res if "error" in r]
     summary = {"cases": a.n, "planned": len(ok), "plan_errors": len(errs),
                "violations": sum(r["violation"] for r in ok),
+               "aim_violations": sum(not r["aim_ok"] for r in ok),
+               "with_gimbal_limit": sum(r["gimbal_up_deg"] < 90 for r in ok),
                "min_margin_over_safe_distance_m": min((r["margin_m"] for r in ok), default=None),
                "turbines_total": sum(r["turbines"] for r in ok), "seconds": round(time.time() - t0, 1),
                "refusals": dict(Counter(refusal_kind(r["error"]) for r in errs).most_common()),

@@ -168,6 +168,23 @@ def test_strong_turbulent_wind_blade_pass_stays_close_and_covers_the_blade():
     assert le > 0.9  # the pass looks straight at blade 1's leading edge (feathered: faces front)
 
 
+def test_gimbal_stops_at_the_vehicles_limit_and_the_report_says_so():
+    """A plan made for a gimbal that looks up 60 deg, flown by one that stops at +30: the photos
+    are taken at +30 and the report counts the photos that asked for more."""
+    route = blade_pass_plan().routes[0]
+    plan = blade_pass_plan()
+    plan.routes[0] = route_through(route.pos, 1.5, pitch=60.0, photo=route.photo,
+                                   component="T1/blade1/leading_edge")
+    free = fly_plan(plan, default_scenario(**QUIET)).automated
+    assert free.uavs[0].photo_pitch_deg.min() > 55 and not any("gimbal" in n for n in free.notes)
+    limited = fly_plan(plan, default_scenario(vehicle={**QUIET["vehicle"],
+                                                        "gimbal_pitch_max_deg": 30.0})).automated
+    assert limited.uavs[0].photo_pitch_deg.max() <= 30.0 + 1e-9
+    n = int(route.photo.sum())
+    assert any(f"{n} of {n} photos ask the gimbal for pitch beyond the vehicle's [-90, +30] deg "
+               "(up to +60)" in note for note in limited.notes)
+
+
 def test_clearance_violation_is_detected_when_forced():
     plan = blade_pass_plan(distance=2.0, safe=3.0)  # planned inside the safe distance
     f = fly_plan(plan, default_scenario(**QUIET)).automated

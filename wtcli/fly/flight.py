@@ -188,8 +188,10 @@ def fly_route(route: Route, scn: Scenario, ground: Ground, uav_index: int, mode:
     planned = planned or route
     flown = manual_route(route, scn.manual_pilot)[0] if mode == "pilot" else route
     c = scn.control
-    ref = make_reference(flown.t, flown.pos, flown.yaw_deg, flown.gimbal_pitch_deg, dt,
-                         c.reference_smoothing_s, c.reference_accel_ms2, c.corner_deviation_m,
+    # The gimbal stops at its limits: a plan asking for more is flown (and photographed) there.
+    lo, hi = scn.vehicle.gimbal_pitch_min_deg, scn.vehicle.gimbal_pitch_max_deg
+    ref = make_reference(flown.t, flown.pos, flown.yaw_deg, np.clip(flown.gimbal_pitch_deg, lo, hi),
+                         dt, c.reference_smoothing_s, c.reference_accel_ms2, c.corner_deviation_m,
                          speed=flown.speed, yaw_rate=scn.vehicle.yaw_rate_deg_s,
                          pitch_rate=scn.vehicle.gimbal_rate_deg_s)
     n = len(ref.t)
@@ -209,7 +211,7 @@ def fly_route(route: Route, scn: Scenario, ground: Ground, uav_index: int, mode:
     if mode == "pilot" and len(steps):
         aim = ou_series(prng, len(steps), 1.0, scn.manual_pilot.aim_sigma_deg, 1e-3, dims=2)
         yaw += aim[:, 0]
-        pitch += aim[:, 1]
+        pitch = np.clip(pitch + aim[:, 1], lo, hi)
     roll = _camera_roll(track, steps, yaw, scn.vehicle.gimbal_roll_leak)
     comp = flown.component[flown.photo]
     return UavFlight(uav=route.uav, route=flown, planned=planned, ref=ref, track=track,
@@ -385,6 +387,15 @@ def measure(kind: str, controller: str, plan: Plan, flights: list[UavFlight], sc
     gsd = cam.gsd_mm(turbine_clearance(plan.turbines, ppos)[0]) if len(ppos) else np.zeros(0)
     energy = {f.uav: _energy_wh(f, scn, ground) for f in flights}
     notes = list(notes or [])
+    asked = np.concatenate([f.route.gimbal_pitch_deg[f.route.photo] for f in flights]) \
+        if flights else np.zeros(0)
+    lo, hi = scn.vehicle.gimbal_pitch_min_deg, scn.vehicle.gimbal_pitch_max_deg
+    beyond = (asked > hi + 1e-6) | (asked < lo - 1e-6)
+    if beyond.any():
+        worst = float(asked[beyond][np.argmax(np.abs(asked[beyond]))])
+        notes.append(f"{kind}: {int(beyond.sum())} of {len(asked)} photos ask the gimbal for pitch "
+                     f"beyond the vehicle's [{lo:+g}, {hi:+g}] deg (up to {worst:+.0f}): taken at "
+                     "the limit (plan with fleet.gimbal_pitch_*_deg to avoid it)")
     for uav, es in energy.items():
         for i, e in enumerate(es):
             if e > scn.vehicle.battery_wh:

@@ -67,6 +67,8 @@ class Vehicle:
     propulsion_efficiency: float
     position_noise_m: float
     velocity_noise_ms: float
+    gimbal_pitch_min_deg: float = -90.0  # the camera elevation the gimbal reaches
+    gimbal_pitch_max_deg: float = 90.0
 
 
 @dataclass(frozen=True)
@@ -166,6 +168,7 @@ _NUM = {
                 "body_drag_per_m": (0, 0.2, False), "yaw_rate_deg_s": (1, 720, False),
                 "yaw_time_constant_s": (0.01, 10, False), "gimbal_rate_deg_s": (1, 720, False),
                 "gimbal_time_constant_s": (0.01, 10, False), "gimbal_roll_leak": (0, 1, False),
+                "gimbal_pitch_min_deg": (-90, 0, False), "gimbal_pitch_max_deg": (0, 90, False),
                 "mass_kg": (0.1, 100, False), "hover_power_w": (1, 20000, False),
                 "battery_wh": (1, 20000, False), "propulsion_efficiency": (0.05, 1, False),
                 "position_noise_m": (0, 5, False), "velocity_noise_ms": (0, 5, False)},

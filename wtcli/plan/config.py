@@ -27,7 +27,8 @@ DEFAULTS_PATH = Path(__file__).resolve().parents[1] / "data" / "turbines-default
 TOP_KEYS = ("site", "camera", "fleet", "mission", "turbines")
 CAMERA_KEYS = ("sensor_width_mm", "focal_mm", "width_px", "height_px")
 FLEET_KEYS = ("uavs", "launch", "inspection_speed_m_s", "cruise_speed_m_s", "max_speed_m_s",
-              "climb_rate_m_s", "battery_minutes", "battery_reserve_minutes", "battery_swap_s")
+              "climb_rate_m_s", "battery_minutes", "battery_reserve_minutes", "battery_swap_s",
+              "gimbal_pitch_min_deg", "gimbal_pitch_max_deg")
 MISSION_KEYS = ("safe_distance_m", "tracking_margin_m", "target_gsd_mm", "overlap",
                 "max_incidence_deg", "min_altitude_m", "takeoff_altitude_m", "min_side_coverage",
                 "coverage_spacing_m", "inspect_tower", "inspect_nacelle", "tower_columns",
@@ -52,6 +53,10 @@ class Fleet:
     battery_minutes: float = 25.0
     battery_reserve_minutes: float = 5.0
     battery_swap_s: float = 180.0
+    # Camera elevation the gimbal can reach (0 level, -90 straight down, +90 straight up): the
+    # default needs one that can look straight up (top-mounted); under-slung ones stop near +30.
+    gimbal_pitch_min_deg: float = -90.0
+    gimbal_pitch_max_deg: float = 90.0
 
     def __post_init__(self) -> None:
         if not self.uavs or len(set(self.uavs)) != len(self.uavs):
@@ -62,8 +67,15 @@ class Fleet:
         if self.battery_minutes <= self.battery_reserve_minutes:
             raise ValueError(f"expected battery_minutes ({self.battery_minutes}) > "
                              f"battery_reserve_minutes ({self.battery_reserve_minutes})")
+        if not -90.0 <= self.gimbal_pitch_min_deg <= 0.0 <= self.gimbal_pitch_max_deg <= 90.0:
+            raise ValueError(f"expected -90 <= gimbal_pitch_min_deg ({self.gimbal_pitch_min_deg}) "
+                             f"<= 0 <= gimbal_pitch_max_deg ({self.gimbal_pitch_max_deg}) <= 90")
         if self.launch is not None:
             object.__setattr__(self, "launch", tuple(float(v) for v in self.launch))
+
+    @property
+    def gimbal_pitch_range(self) -> tuple[float, float]:
+        return (self.gimbal_pitch_min_deg, self.gimbal_pitch_max_deg)
 
     @property
     def usable_battery_s(self) -> float:
@@ -285,7 +297,9 @@ def mission_from_dict(d: Any, where: str = "turbines.yaml", base_dir: str | Path
             climb_rate_m_s=number(f, "climb_rate_m_s", w, 0.2, 15),
             battery_minutes=number(f, "battery_minutes", w, 1, 300),
             battery_reserve_minutes=number(f, "battery_reserve_minutes", w, 0, 100),
-            battery_swap_s=number(f, "battery_swap_s", w, 0, 3600))
+            battery_swap_s=number(f, "battery_swap_s", w, 0, 3600),
+            gimbal_pitch_min_deg=number(f, "gimbal_pitch_min_deg", w, -90, 0),
+            gimbal_pitch_max_deg=number(f, "gimbal_pitch_max_deg", w, 0, 90))
     except ValueError as e:
         raise ConfigError(f"{w}: {e}") from None
 

@@ -73,7 +73,7 @@ def pass_params(mission: Mission) -> tuple[PassParams, float, float]:
             f"lens, a coarser target_gsd_mm (>= {float(cam.gsd_mm(st_min / GSD_FILL)):.2f}) or "
             "allow_coarser_gsd: true")
     pp = PassParams(cam, st, 0.97 * cam.distance_for_gsd(gsd_eval), req, st_min, s.overlap,
-                    s.min_altitude_m)
+                    s.min_altitude_m, mission.fleet.gimbal_pitch_range)
     return pp, gsd_eval, float(cam.gsd_mm(st))
 
 
@@ -280,11 +280,13 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
     go_home()
     if missing is not None:
         return None
-    return _timed_route(uav, wps, swaps, v_slow, v_fast, climb, fl.battery_swap_s)
+    return _timed_route(uav, wps, swaps, v_slow, v_fast, climb, fl.battery_swap_s,
+                        fl.gimbal_pitch_range)
 
 
 def _timed_route(uav: str, wps: list[WP], swaps: list[int], v_slow: float, v_fast: float,
-                 climb: float, swap_s: float) -> Route:
+                 climb: float, swap_s: float, pitch_range: tuple[float, float] = (-90.0, 90.0)
+                 ) -> Route:
     n = len(wps)
     pos = np.array([w.pos for w in wps])
     slow = np.array([w.slow for w in wps[1:]], bool)
@@ -301,7 +303,9 @@ def _timed_route(uav: str, wps: list[WP], swaps: list[int], v_slow: float, v_fas
     F = fwds[np.maximum.accumulate(np.where(have, np.arange(n), 0))]
     F = F / np.linalg.norm(F, axis=1)[:, None]
     yaw = np.degrees(np.arctan2(F[:, 0], F[:, 1])) % 360.0
-    pitch = np.degrees(np.arcsin(np.clip(F[:, 2], -1.0, 1.0)))
+    # Photo stations are chosen within the gimbal's range; an aim carried over between them
+    # (transits) or the overview's is held at the limit, as the gimbal would.
+    pitch = np.clip(np.degrees(np.arcsin(np.clip(F[:, 2], -1.0, 1.0))), *pitch_range)
     return Route(uav, t, pos, speed, yaw, pitch, np.array([w.photo for w in wps]),
                  np.array([w.component for w in wps], dtype=object),
                  summary={"battery_swaps": len(swaps), "sorties": len(swaps) + 1})
@@ -548,13 +552,21 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
         if enforce_safety and vals and min(vals) < s.min_side_coverage:
             worst = min(((b, side, v) for b, d in sides.items() for side, v in d.items()),
                         key=lambda x: x[2])
-            why = [n.split(": ", 1)[1] for n in notes
-                   if n.startswith(f"{t.id}/{worst[0]}/{worst[1]}:") and "blocked by" in n]
+            said = [n.split(": ", 1)[1] for n in notes
+                    if n.startswith(f"{t.id}/{worst[0]}/{worst[1]}:")]
+            if any("gimbal" in n for n in said):  # a side facing down, seen from below
+                why = (f"; its head-on views need the camera beyond {pp.gimbal_text()} "
+                       "(fleet.gimbal_pitch_min_deg / gimbal_pitch_max_deg)")
+                fix = "turn the rotor, use a gimbal that reaches further"
+            else:
+                blocked = [n for n in said if "blocked by" in n]
+                why = (f"; {blocked[0]}" if blocked else "") + \
+                    f" with {pp.required:g} m clearance (safe distance + tracking margin)"
+                fix = "turn the rotor"
             raise PlanError(f"turbine {t.id} {worst[0]} {worst[1]}: predicted coverage "
                             f"{worst[2]:.1%} < min_side_coverage {s.min_side_coverage:.0%} at "
-                            f"{gsd_eval:.2f} mm/px" + (f"; {why[0]}" if why else "")
-                            + f" with {pp.required:g} m clearance (safe distance + tracking "
-                            "margin); turn the rotor, or lower min_side_coverage to accept it")
+                            f"{gsd_eval:.2f} mm/px{why}; {fix}, or lower min_side_coverage to "
+                            "accept it")
 
     summary = _summary(routes, mission, pattern, check, coverage, assignment, gsd_eval,
                        gsd_nominal, pp, notes, launch)
@@ -610,6 +622,7 @@ def _summary(routes: list[Route], mission: Mission, pattern: str, check: dict, c
         "standoff_m": pp.standoff,
         "safe_distance_m": s.safe_distance_m,
         "required_clearance_m": pp.required,
+        "gimbal_pitch_range_deg": list(pp.pitch_range),
         "launch": launch.tolist(),
         "turbines": zones,
         "notes": notes,

@@ -39,6 +39,7 @@ from wtcli.plan.safety import Site
 
 Z = np.array([0.0, 0.0, 1.0])
 ALPHAS_DEG = (15.0, 25.0, 35.0, 45.0, 55.0, 65.0, 75.0)
+GIMBAL_ALPHA_MAX_DEG = 115.0  # stations the gimbal cannot aim head-on may turn this far
 LEG_STEP = 0.5
 
 
@@ -60,6 +61,7 @@ class PassParams:
     min_standoff: float  # closest camera-to-surface distance allowed (required + model slack)
     overlap: float
     min_altitude: float
+    pitch_range: tuple[float, float] = (-90.0, 90.0)  # camera elevation the gimbal reaches, deg
 
     @property
     def leg_required(self) -> float:
@@ -69,6 +71,17 @@ class PassParams:
         """Photo spacing: (1 - overlap) of the footprint's shorter side at ``distance``."""
         fw, fh = self.camera.footprint_m(distance)
         return max(0.25, (1.0 - self.overlap) * min(fw, fh))
+
+    def aim_ok(self, fwd: np.ndarray) -> np.ndarray:
+        """(K,) bool: the gimbal can point the camera along each viewing direction (its
+        elevation within ``pitch_range``; the heading is the airframe's, any)."""
+        F = np.atleast_2d(np.asarray(fwd, float))
+        el = np.degrees(np.arcsin(np.clip(F[:, 2] / np.linalg.norm(F, axis=1), -1.0, 1.0)))
+        return (el >= self.pitch_range[0] - 1e-6) & (el <= self.pitch_range[1] + 1e-6)
+
+    def gimbal_text(self) -> str:
+        lo, hi = self.pitch_range
+        return f"the gimbal's pitch range [{lo:+g}, {hi:+g}] deg"
 
 
 @dataclass
@@ -274,7 +287,8 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
         pos0, fwd0 = _side_points(turbine, k, S, np.full(len(S), g0), np.full(len(S), pp.standoff))
         clear0 = site.clearance(pos0, pp.required)
         ground = site.ground_z(pos0) + pp.min_altitude
-        blocked = (clear0 < pp.required) | (pos0[:, 2] < ground)
+        aim0 = pp.aim_ok(fwd0)  # a side facing down is seen head-on from below, looking up
+        blocked = (clear0 < pp.required) | (pos0[:, 2] < ground) | ~aim0
         forced = side in split_sides
         if forced:
             blocked[:] = True
@@ -282,33 +296,46 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
             passes.append((side, pos0, fwd0))
             continue
         if not forced:
+            why = f" ({int((~aim0).sum())} beyond {pp.gimbal_text()})" if (~aim0).any() else ""
             chunk.notes.append(f"{label}/{side}: {int(blocked.sum())} of {len(S)} stations blocked "
-                               "head-on; flown as two oblique passes")
+                               f"head-on{why}; flown as two oblique passes")
         alphas = np.radians(ALPHAS_DEG[1:] if forced else ALPHAS_DEG)
         jj = np.nonzero(blocked)[0]
         for sign in (1.0, -1.0):
+            al = alphas
+            if (~aim0).any():  # also the least turn that brings the aim within the gimbal's reach
+                ag = _gimbal_alpha(c, n, g0, sign, pp.pitch_range)
+                al = np.unique(np.r_[alphas, [] if ag is None else [ag]])
             pos, fwd = pos0.copy(), fwd0.copy()
             keep = ~blocked if sign > 0 else np.zeros(len(S), bool)
             # Every candidate (station, alpha, extra standoff) at once, in preference order.
-            J, AL, EX = np.meshgrid(jj, alphas, np.array(closer + extra), indexing="ij")
+            J, AL, EX = np.meshgrid(jj, al, np.array(closer + extra), indexing="ij")
             J, AL, EX = J.ravel(), AL.ravel(), EX.ravel()
             cp, cf = _side_points(turbine, k, S[J], g0 + sign * AL, pp.standoff + EX)
-            ok = (site.clearance(cp, pp.required) >= pp.required) & \
+            safe = (site.clearance(cp, pp.required) >= pp.required) & \
                 site.above_ground(cp, pp.min_altitude)
-            per = len(alphas) * len(closer + extra)
+            ok = safe & pp.aim_ok(cf) & ((AL <= math.radians(ALPHAS_DEG[-1]) + 1e-9) | ~aim0[J])
+            per = len(al) * len(closer + extra)
             okm = ok.reshape(len(jj), per)
             first = np.argmax(okm, axis=1)
             found = okm.any(axis=1)
             for n_j, j in enumerate(jj):
                 if found[n_j]:
-                    c = n_j * per + first[n_j]
-                    pos[j], fwd[j] = cp[c], cf[c]
+                    ci = n_j * per + first[n_j]
+                    pos[j], fwd[j] = cp[ci], cf[ci]
             keep[jj] = found
             if keep.any():
                 passes.append((side, pos[keep], fwd[keep]))
-            if (~found).any():
-                parts = sorted({site.nearest_part(pos0[j])[0] for j in jj[~found]})
-                chunk.notes.append(f"{label}/{side}: {int((~found).sum())} station(s) unreachable "
+            # Dropped: no safe candidate (what blocks them), or only ones the gimbal cannot aim.
+            aimless = ~found & safe.reshape(len(jj), per).any(axis=1)
+            if aimless.any():
+                chunk.notes.append(f"{label}/{side}: {int(aimless.sum())} station(s) seen from the "
+                                   f"{'+' if sign > 0 else '-'} side only beyond {pp.gimbal_text()} "
+                                   "(blocked by the gimbal): dropped")
+            unsafe = ~found & ~aimless
+            if unsafe.any():
+                parts = sorted({site.nearest_part(pos0[j])[0] for j in jj[unsafe]})
+                chunk.notes.append(f"{label}/{side}: {int(unsafe.sum())} station(s) unreachable "
                                    f"from the {'+' if sign > 0 else '-'} side at a safe distance "
                                    f"(blocked by {', '.join(parts)}): dropped")
 
@@ -352,6 +379,19 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
         chunk.notes.append(f"{label}: no safe return to the blade's start point; the flight "
                            "goes on from the last pass")
     return chunk
+
+
+def _gimbal_alpha(c: np.ndarray, n: np.ndarray, g0: float, sign: float,
+                  pitch_range: tuple[float, float], margin: float = 0.25) -> float | None:
+    """The least turn (rad, <= GIMBAL_ALPHA_MAX_DEG) from the side's angle g0, towards ``sign``,
+    at which the camera looks back at the blade axis within the gimbal's pitch range (with a
+    ``margin`` in deg): a face turned down is seen obliquely from a camera low enough to look up
+    within the gimbal's reach, as head-on as that allows. None if no turn does."""
+    a = np.radians(np.arange(0.0, GIMBAL_ALPHA_MAX_DEG + 0.25, 0.5))
+    g = g0 + sign * a
+    up = np.degrees(np.arcsin(np.clip(-(np.cos(g) * c[2] + np.sin(g) * n[2]), -1.0, 1.0)))
+    ok = (up >= pitch_range[0] + margin) & (up <= pitch_range[1] - margin)
+    return float(a[np.argmax(ok)]) if ok.any() else None
 
 
 def _arc(turbine: Turbine, frame: tuple, s: float, g_from: float, g_to: float, radius: float,
@@ -456,9 +496,14 @@ class _Blocked(Exception):
 
 
 # ---- nacelle and tower (fixed) ------------------------------------------------------------------------
-def _filter_stations(site: Site, pp: PassParams, pos: np.ndarray) -> np.ndarray:
+def _filter_stations(site: Site, pp: PassParams, pos: np.ndarray,
+                     fwd: np.ndarray | None = None) -> np.ndarray:
+    """Stations that keep the clearance and the minimum altitude (and, with ``fwd``, whose
+    viewing direction the gimbal reaches)."""
     ok = site.clearance(pos, pp.required) >= pp.required
     ok &= site.above_ground(pos, pp.min_altitude)
+    if fwd is not None:
+        ok &= pp.aim_ok(fwd)
     return ok
 
 
@@ -484,9 +529,11 @@ def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams) -> Chunk:
     for i, (comp, pos, fwd) in enumerate(passes):
         if i == 2:
             pos, fwd = pos[::-1], fwd[::-1]  # right side rear -> front
-        keep = _filter_stations(site, pp, pos)
+        keep = _filter_stations(site, pp, pos, fwd)
         if (~keep).any():
-            chunk.notes.append(f"{comp}: {int((~keep).sum())} station(s) too close to a part: dropped")
+            aimless = int((~pp.aim_ok(fwd)).sum())
+            chunk.notes.append(f"{comp}: {int((~keep).sum())} station(s) too close to a part"
+                               + (f" or beyond {pp.gimbal_text()}" if aimless else "") + ": dropped")
         append_chain(chunk, site, pp, [WP(p, f, True, comp) for p, f in zip(pos[keep], fwd[keep])],
                      droppable=True)
     return chunk
@@ -517,7 +564,7 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
         fwd = np.tile(-u, (nz, 1))
         if j % 2 == 1:
             pos, fwd = pos[::-1], fwd[::-1]
-        keep = _filter_stations(site, pp, pos)
+        keep = _filter_stations(site, pp, pos)  # level views: every gimbal reaches them
         if (~keep).any():
             chunk.notes.append(f"{comp}: column {j + 1}: {int((~keep).sum())} station(s) too close "
                                "to a part: dropped")
@@ -651,7 +698,10 @@ def gap_views(turbine: Turbine, pts: np.ndarray, nrm: np.ndarray, area: np.ndarr
     right = np.cross(F, Z)
     rn = np.linalg.norm(right, axis=1, keepdims=True)
     keep = rn[:, 0] > 1e-3  # straight up or down: the yaw is ill-defined, leave those out
+    keep &= pp.aim_ok(F)
     C, F, right, rn = C[keep], F[keep], right[keep], rn[keep]
+    if len(C) == 0:
+        return []
     right /= rn
     down = np.cross(F, right)
     # Which missed samples each candidate images (the coverage rules, with margins).
