@@ -526,6 +526,22 @@ def test_cli_plan_sample_writes_plan_exports_and_picture(cli, tmp_path):
     assert sorted(p.suffix for p in (tmp_path / "exp").iterdir()).count(".waypoints") >= 1
 
 
+def test_cli_plan_for_an_underslung_gimbal_says_so_and_exports_within_it(cli, tmp_path):
+    y = tmp_path / "t.yaml"
+    y.write_text(SAMPLE.read_text().replace("  battery_reserve_minutes: 5\n",
+                                            "  battery_reserve_minutes: 5\n  gimbal_pitch_max_deg: 30\n"))
+    r = cli("plan", y, "--out", tmp_path / "p.json", "--export-dir", tmp_path / "exp")
+    assert r.exit_code == 0, r.output
+    assert "gimbal pitch within [-90, +30] deg" in r.output
+    plan = read_plan(tmp_path / "p.json")
+    assert max(float(rt.gimbal_pitch_deg.max()) for rt in plan.routes) <= 30.0
+    # MAVLink DO_MOUNT_CONTROL (205): p1 is the gimbal pitch the UAV is told to take.
+    rows = [ln.split("\t") for f in (tmp_path / "exp").glob("*.waypoints")
+            for ln in f.read_text().splitlines()[1:]]
+    pitches = [float(c[4]) for c in rows if c[3] == "205"]
+    assert pitches and max(pitches) <= 30.0
+
+
 def test_cli_json_is_one_document(cli):
     r = cli("plan", SAMPLE, "--json")
     assert r.exit_code == 0

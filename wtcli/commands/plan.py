@@ -94,7 +94,9 @@ def register(app: typer.Typer) -> None:
         typer.echo(f"pattern {s['pattern']}: {len(result.routes)} UAV route(s), "
                    f"length {s['total_length_m']:.0f} m, time {s['total_time_s'] / 60:.1f} min, "
                    f"{s['photos']} photos, min clearance {s['min_clearance_m']:.2f} m "
-                   f"(safe {s['safe_distance_m']:g} m), GSD {s['coverage_gsd_mm']:.2f} mm/px")
+                   f"(safe {s['safe_distance_m']:g} m), GSD {s['coverage_gsd_mm']:.2f} mm/px"
+                   + ("" if s["gimbal_pitch_range_deg"] == [-90.0, 90.0] else
+                      ", gimbal pitch within [{:+g}, {:+g}] deg".format(*s["gimbal_pitch_range_deg"])))
         for tid, c in cov.items():
             typer.echo(f"{tid}: predicted blade coverage {c['blade_average']:.1%} "
                        f"(worst side {c['min_side']:.1%}), tower/nacelle {c['structure']:.1%}")
