@@ -280,6 +280,25 @@ def test_the_main_rotor_is_picked_among_several_turbines(with_nacelles):
         pitch_from_instances(four)
 
 
+def test_a_blade_read_twice_counts_once():
+    """The tower's edge beside the blade pointing down, read as a blade too (held-out render
+    9 000 040): four detections on the hub, two in one slot. The rotor's three evenly spaced
+    blades are measured, the weaker double is left out like another rotor's blade. A fourth
+    blade between the slots stays a count error (see above)."""
+    h = w = 400
+    main = rotor(h, w, [30, 150, 270], 14, length=170)
+    double = make_blade_mask(h, w, 262, 5, length=150, start=20)
+    inst = Instances(np.concatenate([main.labels, ["blade"]]), np.concatenate([main.masks, double[None]]),
+                     np.array([1.0, 1.0, 0.99, 1.0, 0.8]))
+    res = pitch_from_instances(inst)
+    assert sorted(round(p) for p in res.phis) == [30, 150, 270]
+    assert res.other_rotor_blades == (4,)
+    loose = Instances(inst.labels, inst.masks, np.array([1.0, 1.0, 0.99, 1.0, 0.8]))
+    loose.masks[4] = make_blade_mask(h, w, 210, 5, length=150, start=20)  # between two slots
+    with pytest.raises(PerceptionError, match="found 4 blades"):
+        pitch_from_instances(loose)
+
+
 def test_a_far_rotor_right_behind_the_hub():
     """Its blades meet at the same image point: told apart by length when clearly shorter."""
     h = w = 400

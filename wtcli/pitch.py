@@ -32,6 +32,7 @@ blade — is admitted and flagged ``admitted_low_score`` (``admit_low_score_blad
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -339,6 +340,31 @@ def select_rotor(blades: ContourSet, axes: list[Axis],
     return best, best_c
 
 
+def _evenly_spaced(out: list[BladePitch], n: int,
+                   slot_tolerance: float = SLOT_TOLERANCE_DEG) -> list[BladePitch]:
+    """More blades on the hub than the rotor has, where the extra ones double a blade (the
+    tower's edge beside the blade pointing down, a far rotor's blade behind one): keep the
+    ``n`` spaced like an ``n``-blade rotor's (every gap in φ within ``slot_tolerance`` of
+    360/n), the highest-scoring such choice, when every blade left out points within
+    ``slot_tolerance`` of a kept one. Else keep all: a blade between the slots stays a count
+    error (a wrong angle would misplace the flight around the rotor)."""
+    if n < 2 or not n < len(out) <= 8:
+        return out
+    best, best_key = out, None
+    for sub in itertools.combinations(range(len(out)), n):
+        p = sorted(out[k].phi_deg for k in sub)
+        gaps = np.diff(p + [p[0] + 360.0])
+        if np.abs(gaps - 360.0 / n).max() > slot_tolerance:
+            continue
+        if any(min(abs(_angle_diff(out[d].phi_deg, out[k].phi_deg)) for k in sub) > slot_tolerance
+               for d in range(len(out)) if d not in sub):
+            continue
+        key = (sum(out[k].score for k in sub), sum(out[k].area for k in sub))
+        if best_key is None or key > best_key:
+            best, best_key = [out[k] for k in sub], key
+    return best
+
+
 def _longest_if_clearly(keep: list[int], axes: list[Axis], n: int) -> list[int]:
     """Too many blades on one hub: a far turbine right behind it shows shorter blades. Keep the
     ``n`` longest when each is at least 1.25x as long as every other; else keep all (and the
@@ -540,6 +566,11 @@ def measure_pitch(contours: ContourSet, expected_blades: int | None = 3,
 
     out = [_blade_pitch(inst, ax, hub) for inst, ax in zip(blades, axes)]
     n_rotor = rotor_blades or expected_blades or DEFAULT_ROTOR_BLADES
+    doubles = _evenly_spaced(out, n_rotor)
+    if len(doubles) < len(out):  # the doubles are left out like other rotors' blades
+        kept = {b.source_index for b in doubles}
+        others += tuple(b.source_index for b in out if b.source_index not in kept)
+        out = doubles
     if candidates and len(out) < n_rotor and source != "blade_taper":
         admitted = admit_low_score_blades(candidates, list(blades), out, hub, n_rotor,
                                           contours.image_size)
