@@ -45,6 +45,25 @@ def test_view_size_and_types():
         assert set(s.instances.labels) <= {"blade", "tower", "nacelle"}
 
 
+def test_inspection_stops_put_a_blade_straight_up_or_down_and_change_nothing_else():
+    """Training's emphasis (``stops``): some rotors stand in a Y or an inverted Y. The rest of
+    the photo's draws are kept, and without it (the held-out sets) the photo is unchanged."""
+    az = []
+    for seed in range(12):
+        plain, stopped = render_sample(seed, W, H, view="front"), render_sample(seed, W, H, view="front", stops=1.0)
+        assert render_sample(seed, W, H, view="front", stops=0.0).image.tobytes() == plain.image.tobytes()
+        a = [b["rotor_azimuth_deg"] for b in stopped.truth["blades"]]
+        az.append(min(abs((x - c + 180) % 360 - 180) for x in a for c in (90.0, 270.0)))
+        assert stopped.truth["turbine"]["yaw_deg"] == plain.truth["turbine"]["yaw_deg"]
+    assert max(az) <= 10.0 + 1e-9
+    half = [render_sample(seed, W, H, stops=0.5).truth for seed in range(40)]
+    near = sum(min(abs((b["rotor_azimuth_deg"] - c + 180) % 360 - 180) for b in t["blades"]
+                   for c in (90.0, 270.0)) <= 10.0 for t in half)
+    assert 15 <= near <= 35  # about half stopped, plus a few by chance (a third of the rest)
+    with pytest.raises(ValueError, match="stops"):
+        render_sample(0, W, H, stops=1.5)
+
+
 def test_bad_arguments_raise_value_error():
     with pytest.raises(ValueError, match="seed"):
         render_sample(-1)

@@ -41,6 +41,10 @@ def train(
                                         help="Shorter sides to train at, e.g. 384,416,448,480 "
                                              "(default 320,352,384,416; inference uses 480)."),
     no_augment: bool = typer.Option(False, "--no-augment", help="Train on the images as they are."),
+    stops: float = typer.Option(0.3, "--stops", min=0.0, max=1.0,
+                                help="Share of synthetic renders whose rotor stands where crews "
+                                     "stop it for inspection: a Y or an inverted Y (a blade in "
+                                     "front of the tower)."),
     resume: bool = typer.Option(False, "--resume", help="Continue from OUT/last.ckpt."),
     json_out: bool = typer.Option(False, "--json", help="Print the run summary JSON on stdout."),
 ) -> None:
@@ -68,7 +72,7 @@ def train(
                       width=width, height=height, seed=seed, init=str(init) if init else None,
                       checkpoint_every=checkpoint_every, eval_count=eval_count,
                       val=str(val) if val else None, device=device, workers=workers, threads=threads,
-                      augment=not no_augment, resume=resume, train_sizes=train_sizes)
+                      augment=not no_augment, stops=stops, resume=resume, train_sizes=train_sizes)
     with make_progress() as progress:
         task = progress.add_task("train", total=iterations, status="")
 

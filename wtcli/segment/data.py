@@ -52,13 +52,13 @@ def _fallback_render(seed: int, width: int, height: int, view: str | None = None
                                  np.stack([i[2] for i in inst])))
 
 
-def render(seed: int, width: int, height: int, view: str | None = None) -> Sample:
+def render(seed: int, width: int, height: int, view: str | None = None, stops: float = 0.0) -> Sample:
     """One synthetic scene: wtcli.synth.render.render_sample when available."""
     try:
         from wtcli.synth.render import render_sample
     except ImportError:
         return _fallback_render(seed, width, height, view)
-    s = render_sample(seed, width=width, height=height, view=view)
+    s = render_sample(seed, width=width, height=height, view=view, stops=stops)
     return Sample(s.image, s.instances)
 
 
@@ -66,15 +66,17 @@ class SynthDataset(torch.utils.data.Dataset):
     """Scene ``i`` is the render of seed ``seed_base + i`` (deterministic, nothing stored)."""
 
     def __init__(self, length: int, width: int = 640, height: int = 480,
-                 seed_base: int = TRAIN_SEED_BASE, augment: bool = True, aug_seed: int = 0):
+                 seed_base: int = TRAIN_SEED_BASE, augment: bool = True, aug_seed: int = 0,
+                 stops: float = 0.0):
         self.length, self.width, self.height = int(length), int(width), int(height)
         self.seed_base, self.augment, self.aug_seed = int(seed_base), augment, int(aug_seed)
+        self.stops = float(stops)  # render_sample's: rotors stopped in a Y / inverted Y
 
     def __len__(self) -> int:
         return self.length
 
     def __getitem__(self, i: int):
-        s = render(self.seed_base + int(i), self.width, self.height)
+        s = render(self.seed_base + int(i), self.width, self.height, stops=self.stops)
         if self.augment:
             s = augment(s, np.random.default_rng((self.aug_seed, self.seed_base + int(i))))
         return to_target(s)

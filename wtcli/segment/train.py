@@ -58,6 +58,7 @@ class TrainConfig:
     workers: int = 1
     threads: int | None = None  # torch CPU threads; None: 1 on a CPU (see train())
     augment: bool = True
+    stops: float = 0.3  # share of synthetic scenes whose rotor stands in a Y / inverted Y
     resume: bool = False
     train_sizes: tuple[int, ...] = field(default_factory=lambda: TRAIN_MIN_SIZES)
 
@@ -74,6 +75,7 @@ class TrainConfig:
         need(self.checkpoint_every >= 1, "expected --checkpoint-every >= 1")
         need(self.eval_count >= 0, "expected --eval-count >= 0")
         need(self.max_minutes is None or self.max_minutes > 0, "expected --max-minutes > 0")
+        need(0.0 <= self.stops <= 1.0, f"expected --stops in [0, 1], got {self.stops}")
         need(len(self.train_sizes) > 0 and all(64 <= v <= 2048 for v in self.train_sizes),
              f"expected --sizes in 64..2048 px, got {','.join(map(str, self.train_sizes)) or 'none'}")
 
@@ -101,7 +103,7 @@ def make_dataset(cfg: TrainConfig):
     if cfg.data:
         return D.CocoDataset(cfg.data, augment=cfg.augment, aug_seed=cfg.seed)
     return D.SynthDataset(cfg.synth_count, cfg.width, cfg.height, augment=cfg.augment,
-                          aug_seed=cfg.seed)
+                          aug_seed=cfg.seed, stops=cfg.stops)
 
 
 def _batches(ds, cfg: TrainConfig, start_it: int):

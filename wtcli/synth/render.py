@@ -77,13 +77,24 @@ def _check_args(seed: int, width: int, height: int, view: str | None) -> None:
 
 
 def render_sample(seed: int, width: int = 640, height: int = 480,
-                  view: str | None = None) -> SynthSample:
-    """One synthetic photo; a pure function of (seed, width, height, view).
+                  view: str | None = None, stops: float = 0.0) -> SynthSample:
+    """One synthetic photo; a pure function of (seed, width, height, view, stops).
 
-    ``view``: "front", "oblique", "side", "rear", or None to draw one (VIEW_ODDS)."""
+    ``view``: "front", "oblique", "side", "rear", or None to draw one (VIEW_ODDS).
+    ``stops``: the chance that the rotor stands where crews stop it for an inspection, a "Y"
+    or an inverted "Y" (a blade straight up or down, +-10 deg; training's emphasis on the blade
+    in front of the tower); decided on a stream of its own, so with 0 (the held-out sets) or
+    when not drawn the photo is the same as without."""
     _check_args(seed, width, height, view)
+    if not 0.0 <= stops <= 1.0:
+        raise ValueError(f"expected stops in [0, 1], got {stops!r}")
+    azimuth = None
+    if stops > 0:
+        srng = np.random.default_rng([int(seed), width, height, 7_000_001])
+        if srng.random() < stops:
+            azimuth = float(srng.choice([90.0, 270.0]) + srng.uniform(-10.0, 10.0))
     rng = np.random.default_rng([int(seed), width, height, (VIEWS.index(view) + 1) if view else 0])
-    scene = sample_scene(rng, width, height, view)
+    scene = sample_scene(rng, width, height, view, rotor_azimuth=azimuth)
     cam = scene.camera
     zenith, horizon = sky_colours(scene.env, rng)
     bg = render_background(cam, scene.env, scene.turbine, rng, zenith, horizon)

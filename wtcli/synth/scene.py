@@ -74,9 +74,10 @@ def _choice(rng: np.random.Generator, items: tuple, odds: tuple) -> Any:
 
 
 def sample_turbine(rng: np.random.Generator, tid: str = "T1", base=(0.0, 0.0, 0.0),
-                   like: Turbine | None = None) -> Turbine:
+                   like: Turbine | None = None, rotor_azimuth: float | None = None) -> Turbine:
     """A random three-blade turbine; ``like`` makes a sibling of the same farm (similar size,
-    similar yaw), as turbines of one farm usually are."""
+    similar yaw), as turbines of one farm usually are. ``rotor_azimuth`` (blade 1's, deg)
+    replaces the drawn one (the draw still happens: the rest of the scene stays the same)."""
     if like is None:
         D = float(rng.uniform(60.0, 170.0))
         R = D / 2
@@ -92,8 +93,9 @@ def sample_turbine(rng: np.random.Generator, tid: str = "T1", base=(0.0, 0.0, 0.
         scale = {k: 1.0 for k in ("tower", "nl", "nw", "nh", "hub", "chord", "tip")}
     parked = rng.random() < 0.8
     pitch = float(rng.uniform(78, 92)) if parked else float(rng.uniform(0, 25))
+    azimuth = float(rng.uniform(0, 360))
     return Turbine.with_rotor_azimuth(
-        float(rng.uniform(0, 360)), blades=3, id=tid, base=tuple(base), hub_height=hub,
+        azimuth if rotor_azimuth is None else float(rotor_azimuth), blades=3, id=tid, base=tuple(base), hub_height=hub,
         rotor_diameter=D, yaw_deg=yaw % 360, blade_pitch_deg=pitch,
         tower_base_radius=max(1.0, 0.026 * hub) * scale["tower"],
         nacelle_length=0.25 * R * scale["nl"], nacelle_width=0.09 * R * scale["nw"],
@@ -122,10 +124,11 @@ def _sample_fill(rng: np.random.Generator) -> float:
     return float(rng.uniform(0.95, 3.0))  # close: blades cut by the frame
 
 
-def sample_scene(rng: np.random.Generator, width: int, height: int, view: str | None) -> Scene:
+def sample_scene(rng: np.random.Generator, width: int, height: int, view: str | None,
+                 rotor_azimuth: float | None = None) -> Scene:
     if view is None:
         view = _choice(rng, tuple(VIEW_ODDS), tuple(VIEW_ODDS.values()))
-    turbine = sample_turbine(rng)
+    turbine = sample_turbine(rng, rotor_azimuth=rotor_azimuth)
     hfov = float(rng.uniform(55.0, 84.0))
     focal = SENSOR_WIDTH_MM / (2 * math.tan(math.radians(hfov) / 2))
     cam0 = Camera(width, height, focal, SENSOR_WIDTH_MM)
