@@ -916,9 +916,9 @@ def test_return_over_a_higher_base_between_two_lower_ones_climbs_over_its_ground
 
 
 def test_long_leg_goes_round_a_tower_in_line_where_it_stands():
-    """A 1 km transit with a tower 300 m along it: the detour bends at the tower (a few cm
-    longer), not 7 m sideways over the whole length (14 m longer, as the search from the
-    middle and the ends found)."""
+    """A 1 km transit with a tower 300 m along it: the detour bends at the tower (1.3 m longer,
+    within 40 m of it), not 7 m sideways over the whole length (14 m longer, as the search from
+    the middle and the ends found)."""
     from wtcli.plan.paths import connect
     from wtcli.plan.safety import Site
 
@@ -926,8 +926,29 @@ def test_long_leg_goes_round_a_tower_in_line_where_it_stands():
     site = Site((t,), launch=np.array([0.0, -100.0, 0.0]))
     p, q = np.array([0.0, 0.0, 30.0]), np.array([1000.0, 0.0, 30.0])
     chain = np.array([p] + connect(site, p, q, 4.55, ground=5.0) + [q])
-    assert np.linalg.norm(np.diff(chain, axis=0), axis=1).sum() < 1000.0 + 1.0
+    assert np.linalg.norm(np.diff(chain, axis=0), axis=1).sum() < 1000.0 + 2.0
+    assert (np.abs(chain[1:-1, 0] - 300.0) < 40.0).all()  # every bend at the tower
     assert t.segment_clearance(chain[:-1], chain[1:], step=0.05).min() >= 4.55
+
+
+def test_long_leg_blocked_at_both_ends_is_detoured_at_each():
+    """A 2 km transit with a tower in line 150 m from each end: two blocked stretches, each
+    detoured on its own (short searches), straight in between; safe at every 5 cm."""
+    from wtcli.plan.paths import connect
+    from wtcli.plan.safety import Site
+
+    ts = (make_turbine(az=0.0, yaw=90.0, base=(150.0, 0.0, 0.0)),
+          make_turbine(az=0.0, yaw=90.0, base=(1850.0, 0.0, 0.0), tid="T2"))
+    launch = np.array([0.0, -100.0, 0.0])
+    site = Site(ts, launch=launch)
+    p, q = np.array([0.0, 0.0, 30.0]), np.array([2000.0, 0.0, 30.0])
+    runs = site.blocked_stretches(p, q, 4.55, 0.5, 4.8, gap=60.0)
+    assert len(runs) == 2
+    assert all(abs(0.5 * (a + b) * 2000.0 - x) < 10.0 for (a, b), x in zip(runs, (150.0, 1850.0)))
+    chain = np.array([p] + connect(site, p, q, 4.55, ground=5.0) + [q])
+    assert (np.minimum(np.abs(chain[1:-1, 0] - 150.0), np.abs(chain[1:-1, 0] - 1850.0)) < 70.0).all()
+    assert np.linalg.norm(np.diff(chain, axis=0), axis=1).sum() < 2000.0 + 4.0
+    _assert_chain_clear(ts, launch, chain, 4.55, 5.0)
 
 
 # ---- gimbal limits -----------------------------------------------------------------------------------

@@ -111,17 +111,22 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
             hints: list[np.ndarray] | None = None, ground: float | None = None) -> list[np.ndarray] | None:
     """Via points (possibly none) so that p -> vias -> q keeps ``leg_required`` from everything.
 
-    Tries the straight leg, then one via point pushed from the midpoint (or from where a long
-    leg is blocked), from p or from q, then two via points pushed from p and q (also held at
-    the height of the higher end or ground between uneven grounds), along the hint and escape
-    directions by growing distances (a distance's candidates checked together, shortest chain
-    first; the first that clears wins). None if none does.
+    Tries the straight leg; a long one (> LONG_LEG) blocked in short stretches, each of those
+    on its own (``_connect_piecewise``); then one via point pushed from the midpoint (or from
+    where a long leg is blocked), from p or from q, then two via points pushed from p and q
+    (also held at the height of the higher end or ground between uneven grounds), along the
+    hint and escape directions by growing distances (a distance's candidates checked together,
+    shortest chain first; the first that clears wins). None if none does.
     """
     p, q = np.asarray(p, float), np.asarray(q, float)
     cap = leg_required + 0.5 * LEG_STEP  # legs subtract up to half a step of sampling slack
     clear = site.segment_clearance(p[None], q[None], LEG_STEP, cap)[0] >= leg_required
     if clear and (ground is None or site.legs_above_ground(p[None], q[None], ground)[0]):
         return []
+    if not clear and np.linalg.norm(q - p) > LONG_LEG:
+        vias = _connect_piecewise(site, p, q, leg_required, hints, ground)
+        if vias is not None:
+            return vias
     m = 0.5 * (p + q)
     side = np.cross(Z, q - p)
     side = [_unit(side), -_unit(side)] if np.linalg.norm(side) > 1e-6 else []
@@ -186,6 +191,49 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
             if good.any():
                 return batch[int(np.argmax(good))]
     return None
+
+
+LONG_LEG = 150.0  # m: a longer blocked leg is detoured piece by piece where it is blocked
+LOCAL_MARGIN, LOCAL_MAX = 30.0, 130.0  # each detour: from/to this far beyond a blocked stretch
+
+
+def _connect_piecewise(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
+                       hints: list[np.ndarray] | None, ground: float | None) -> list[np.ndarray] | None:
+    """A long leg (a transit between turbines, to or from the launch point) blocked in a few
+    short stretches (mostly near its ends, by the turbines there): straight where it is clear,
+    and from LOCAL_MARGIN before to LOCAL_MARGIN after each blocked stretch ``connect``-ed on
+    its own, a short leg. The same kind of detours the full search finds, at a fraction of its
+    cost (its candidates are chains across the site). None where a stretch is too long, a
+    straight piece does not clear (the ground), or a detour is not found."""
+    L = float(np.linalg.norm(q - p))
+    cap = leg_required + 0.5 * LEG_STEP
+    runs = site.blocked_stretches(p, q, leg_required, LEG_STEP, cap, gap=2 * LOCAL_MARGIN)
+    if not runs:
+        return None
+    cuts = []
+    for t0, t1 in runs:
+        a, b = max(0.0, t0 - LOCAL_MARGIN / L), min(1.0, t1 + LOCAL_MARGIN / L)
+        if (b - a) * L > LOCAL_MAX:
+            return None
+        cuts.append((a, b))
+    ends = [p + t * (q - p) for ab in cuts for t in ab]  # A1, B1, A2, B2, ...
+    ends[0] = p if cuts[0][0] == 0.0 else ends[0]
+    ends[-1] = q if cuts[-1][1] == 1.0 else ends[-1]
+    straight0 = np.array([p] + ends[1::2])  # p -> A1, B1 -> A2, ..., Bk -> q
+    straight1 = np.array(ends[0::2] + [q])
+    keep = np.linalg.norm(straight1 - straight0, axis=1) > 1e-9
+    s0, s1 = straight0[keep], straight1[keep]
+    if len(s0) and ((site.segment_clearance(s0, s1, LEG_STEP, cap) < leg_required).any() or (
+            ground is not None and not site.legs_above_ground(s0, s1, ground).all())):
+        return None
+    out: list[np.ndarray] = []
+    for i in range(len(cuts)):
+        A, B = ends[2 * i], ends[2 * i + 1]
+        vias = connect(site, A, B, leg_required, hints, ground)  # short: no recursion
+        if vias is None:
+            return None
+        out += ([] if A is p else [A]) + vias + ([] if B is q else [B])
+    return out
 
 
 def _escapes(site: Site, points, first: list[np.ndarray], extra: list[np.ndarray]) -> list[np.ndarray]:

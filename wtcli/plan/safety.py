@@ -254,15 +254,35 @@ class Site:
                       cap: float | None = None) -> float | None:
         """Where (t in [0, 1]) the leg p0 -> p1's least-clearance sample of ``segment_clearance``
         lies; None where no sample is near a turbine."""
+        t, c = self._leg_samples(p0, p1, step, cap)
+        return float(t[np.argmin(c)]) if len(t) else None
+
+    def blocked_stretches(self, p0: np.ndarray, p1: np.ndarray, need: float, step: float = 0.5,
+                          cap: float | None = None, gap: float = 0.0) -> list[tuple[float, float]]:
+        """(first, last) t in [0, 1] of each run of the leg p0 -> p1's samples whose
+        ``segment_clearance`` bound is below ``need``; runs closer than ``gap`` metres merged."""
+        length = float(np.linalg.norm(np.asarray(p1, float) - np.asarray(p0, float)))
+        t, c = self._leg_samples(p0, p1, step, cap)
+        n = max(1, math.ceil(length / step))
+        bad = np.sort(t[c - 0.5 * length / n < need])
+        if len(bad) == 0:
+            return []
+        cut = np.flatnonzero(np.diff(bad) * length > max(gap, 1.5 * length / n)) + 1
+        return [(float(r[0]), float(r[-1])) for r in np.split(bad, cut)]
+
+    def _leg_samples(self, p0: np.ndarray, p1: np.ndarray, step: float,
+                     cap: float | None) -> tuple[np.ndarray, np.ndarray]:
+        """(t, clearance) of the samples of ``segment_clearance`` on one leg that lie near a
+        turbine (the others are at the cull distance)."""
         p0, p1 = np.asarray(p0, float)[None], np.asarray(p1, float)[None]
         cap = self.horizon if cap is None else min(cap, self.horizon)
         n = np.maximum(1, np.ceil(np.linalg.norm(p1 - p0, axis=1) / step).astype(int))
         _, j0, j1 = self._sample_ranges(p0, p1, n, self.cull_distance(cap))
         if len(j0) == 0:
-            return None
+            return np.zeros(0), np.zeros(0)
         j = np.concatenate([np.arange(a, b + 1) for a, b in zip(j0, j1)])
         t = j / n[0]
-        return float(t[np.argmin(self.clearance(p0 + (p1 - p0) * t[:, None], cap))])
+        return t, self.clearance(p0 + (p1 - p0) * t[:, None], cap)
 
     def _sample_ranges(self, p0: np.ndarray, p1: np.ndarray, n: np.ndarray,
                        grow: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
