@@ -340,7 +340,7 @@ def select_rotor(blades: ContourSet, axes: list[Axis],
     return best, best_c
 
 
-def _evenly_spaced(out: list[BladePitch], n: int,
+def _without_doubles(out: list[BladePitch], n: int,
                    slot_tolerance: float = SLOT_TOLERANCE_DEG) -> list[BladePitch]:
     """More blades on the hub than the rotor has, where the extra ones double a blade (the
     tower's edge beside the blade pointing down, a far rotor's blade behind one): keep the
@@ -566,11 +566,11 @@ def measure_pitch(contours: ContourSet, expected_blades: int | None = 3,
 
     out = [_blade_pitch(inst, ax, hub) for inst, ax in zip(blades, axes)]
     n_rotor = rotor_blades or expected_blades or DEFAULT_ROTOR_BLADES
-    doubles = _evenly_spaced(out, n_rotor)
-    if len(doubles) < len(out):  # the doubles are left out like other rotors' blades
-        kept = {b.source_index for b in doubles}
+    rotor = _without_doubles(out, n_rotor)
+    if len(rotor) < len(out):  # the doubles are left out like other rotors' blades
+        kept = {b.source_index for b in rotor}
         others += tuple(b.source_index for b in out if b.source_index not in kept)
-        out = doubles
+        out = rotor
     if candidates and len(out) < n_rotor and source != "blade_taper":
         admitted = admit_low_score_blades(candidates, list(blades), out, hub, n_rotor,
                                           contours.image_size)
