@@ -620,9 +620,20 @@ def test_worker_processes_give_the_same_plan():
     ts = tuple(make_turbine(az=25 * i, yaw=40 * i, tid=f"T{i + 1}", base=(250.0 * i, 0, 0))
                for i in range(2))
     m = Mission(ts, CAM, settings=Settings(inspect_tower=False, min_side_coverage=0.0))
-    a, b = plan_mission(m, workers=1), plan_mission(m, workers=2)
+    seen: dict[int, list] = {1: [], 2: []}
+    a, b = (plan_mission(m, workers=w, progress=lambda *x, w=w: seen[w].append(x)) for w in (1, 2))
     assert np.array_equal(a.routes[0].pos, b.routes[0].pos)
     assert a.summary["predicted_coverage"] == b.summary["predicted_coverage"]
+    # The progress reports: every stage in order, each counted from 0 to its total, one by one.
+    from wtcli.plan.mission import STAGES
+
+    assert seen[1] == seen[2]
+    assert [st for st, done, _ in seen[1] if done == 0] == list(STAGES)
+    for st in STAGES:
+        counts = [(done, total) for s_, done, total in seen[1] if s_ == st]
+        total = counts[0][1]
+        assert counts == [(i, total) for i in range(total + 1)]
+    assert dict((st, total) for st, _, total in seen[1])["turbines"] == 2
 
 
 def test_photo_azimuths_not_spread_like_a_rotor_are_refused():

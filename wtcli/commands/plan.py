@@ -28,6 +28,28 @@ def _pose(text: str | None):
     return CameraPose(tuple(v[:3]), tuple(v[3:6]), v[6] if len(v) == 7 else 0.0)
 
 
+# What each of plan_mission's stages (wtcli.plan.mission.STAGES) does, for the progress bar.
+_STAGE_TEXT = {"turbines": "trajectories", "legs": "legs between turbines", "routes": "UAV routes",
+               "coverage": "coverage check"}
+
+
+def _plan_with_progress(mission, azimuths, pattern: str, jobs: int | None):
+    """plan_mission with a progress bar on stderr, one line per stage (transient)."""
+    from wtcli.console import make_progress
+    from wtcli.plan.mission import plan_mission
+
+    with make_progress(transient=True) as bar:
+        tasks: dict[str, int] = {}
+
+        def progress(stage: str, done: int, total: int) -> None:
+            if stage not in tasks:
+                tasks[stage] = bar.add_task(_STAGE_TEXT.get(stage, stage), total=total, status="")
+            bar.update(tasks[stage], completed=done)
+
+        return plan_mission(mission, azimuths=azimuths, pattern=pattern, workers=jobs,
+                            progress=progress)
+
+
 def register(app: typer.Typer) -> None:
     @app.command("plan")
     def plan(
@@ -53,6 +75,10 @@ def register(app: typer.Typer) -> None:
             help="Where the photo was taken from and the point it looked at (ENU m); default: at "
                  "S_p looking at the rotor centre."),
         json_out: bool = typer.Option(False, "--json", help="Print the plan JSON on stdout."),
+        jobs: Optional[int] = typer.Option(
+            None, "--jobs", "-j", min=1,
+            help="Worker processes (default: one per CPU on sites of 8 turbines or more, none on "
+                 "smaller ones); the plan is the same whatever the number."),
     ) -> None:
         """Plan a safe inspection flight around every blade side, the nacelle and the tower."""
         import cv2
@@ -61,7 +87,7 @@ def register(app: typer.Typer) -> None:
         from wtcli.plan.angles import blade_azimuths
         from wtcli.plan.config import load_mission
         from wtcli.plan.exports import export_all
-        from wtcli.plan.mission import PATTERNS, plan_mission
+        from wtcli.plan.mission import PATTERNS
         from wtcli.plan.picture import draw_plan
 
         if pattern not in PATTERNS:
@@ -71,7 +97,7 @@ def register(app: typer.Typer) -> None:
         for tid, src in sources.items():
             err_console.print(f"{tid}: blade azimuths "
                               f"{', '.join(f'{a:.1f}' for a in azimuths[tid])} deg from {src}")
-        result = plan_mission(mission, azimuths=azimuths or None, pattern=pattern)
+        result = _plan_with_progress(mission, azimuths or None, pattern, jobs)
         doc = document(PLAN_SCHEMA, PLAN_VERSION, result.to_dict())
         if out is not None:
             write_plan(out, result)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from functools import lru_cache
@@ -447,29 +448,66 @@ def _side_coverage(job: tuple) -> tuple[dict, float, float]:
     return cov.by_blade_side(), cov.blade_average(), cov.structure_fraction()
 
 
-def _map(fn, jobs: list, workers: int | None) -> list:
+def _map(fn, jobs: list, workers: int | None, tick: Callable[[], None] | None = None) -> list:
+    """``[fn(j) for j in jobs]``, in worker processes from 8 jobs on (or ``workers`` of them);
+    ``tick()`` after each result, in order."""
     if workers is None:
         workers = (os.cpu_count() or 1) if len(jobs) >= 8 else 1
     workers = max(1, min(workers, len(jobs)))
+    out = []
     if workers == 1:
-        return [fn(j) for j in jobs]
-    import multiprocessing as mp
+        results = map(fn, jobs)
+    else:
+        import multiprocessing as mp
 
-    with ProcessPoolExecutor(workers, mp_context=mp.get_context("fork")) as ex:
-        return list(ex.map(fn, jobs, chunksize=max(1, len(jobs) // (4 * workers))))
+        ex = ProcessPoolExecutor(workers, mp_context=mp.get_context("fork"))
+        results = ex.map(fn, jobs, chunksize=max(1, len(jobs) // (4 * workers)))
+    try:
+        for r in results:
+            out.append(r)
+            if tick is not None:
+                tick()
+    finally:
+        if workers > 1:
+            ex.shutdown(cancel_futures=True)
+    return out
+
+
+# The stages plan_mission reports to its ``progress`` callback, in order.
+STAGES = ("turbines", "legs", "routes", "coverage")
+
+
+def _ticker(progress: Callable[[str, int, int], None] | None, stage: str,
+            total: int) -> Callable[[], None] | None:
+    """Report ``stage`` started (0 of ``total``); the returned ``tick()`` reports one more done."""
+    if progress is None:
+        return None
+    progress(stage, 0, total)
+    done = 0
+
+    def tick() -> None:
+        nonlocal done
+        done += 1
+        progress(stage, done, total)
+
+    return tick
 
 
 # ---- the planner -----------------------------------------------------------------------------------------
 def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = None,
                  pattern: str = "adaptive", enforce_safety: bool | None = None,
-                 workers: int | None = None) -> Plan:
+                 workers: int | None = None,
+                 progress: Callable[[str, int, int], None] | None = None) -> Plan:
     """Plan every turbine of ``mission`` for its fleet; see the module docstring.
 
     azimuths: turbine id -> blade rotor azimuths (deg), overriding the YAML.
     enforce_safety: raise PlanError on any clearance/ground violation or coverage shortfall
     (default: True for "adaptive", False for the "fixed-y" baseline, which reports them).
     workers: processes for the per-turbine work, the legs between turbines and the routes
-    (default: one per CPU from 8 jobs on; the result does not depend on it)."""
+    (default: one per CPU from 8 jobs on; the result does not depend on it).
+    progress: called as ``progress(stage, done, total)`` when a stage starts (done 0) and after
+    each of its jobs; stages ``STAGES``: per-turbine trajectories, legs between turbines, UAV
+    routes, coverage per turbine."""
     if pattern not in PATTERNS:
         raise ConfigError(f"pattern: expected one of {', '.join(PATTERNS)}, got {pattern!r}")
     if enforce_safety is None:
@@ -501,7 +539,8 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
     links: dict = {}
     notes: list[str] = []
     jobs = [(t, site_plan, pp, mission, pattern, gsd_eval) for t in assumed]
-    for t, (chunks, tour_links, tour_times) in zip(assumed, _map(_tour, jobs, workers)):
+    tours_done = _map(_tour, jobs, workers, _ticker(progress, "turbines", len(jobs)))
+    for t, (chunks, tour_links, tour_times) in zip(assumed, tours_done):
         tours[t.id], times[t.id] = chunks, tour_times
         links.update(tour_links)
         notes += [n for c in chunks for n in c.notes]
@@ -531,8 +570,8 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
         build_route(*job, missing=missing)
     legs = {(p.tobytes(), q.tobytes()): (site_plan, p, q, pp.leg_required, s.min_altitude_m)
             for p, q in missing}
-    links.update(_map(_link, list(legs.values()), workers))
-    routes = _map(_route, jobs, workers)
+    links.update(_map(_link, list(legs.values()), workers, _ticker(progress, "legs", len(legs))))
+    routes = _map(_route, jobs, workers, _ticker(progress, "routes", len(jobs)))
 
     check = check_routes(routes, site_real, launch, s.safe_distance_m, s.min_altitude_m)
     if enforce_safety and (check["waypoint_violations"] or check["leg_violations"]
@@ -544,7 +583,7 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
     photos = _photos_by_turbine([t.id for t in real], routes)
     sides_all = _map(_side_coverage, [(t, photos[t.id], mission.camera, gsd_eval,
                                        s.coverage_spacing_m, s.max_incidence_deg) for t in real],
-                     workers)
+                     workers, _ticker(progress, "coverage", len(real)))
     for t, (sides, average, structure) in zip(real, sides_all):
         vals = [v for d in sides.values() for v in d.values()]
         coverage[t.id] = {"by_blade_side": sides, "blade_average": average,
