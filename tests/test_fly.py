@@ -149,11 +149,16 @@ def test_straight_line_without_wind_tracks_within_centimetres():
 def test_pid_beats_feedforward_in_steady_wind():
     scn = default_scenario(wind={"speed_ms": 8, "reference_height_m": 50, "direction_deg": 0,
                                  "turbulence": {"model": "none"}}, **QUIET)
-    rep = fly_plan(line_plan(), scn, baselines=True)
+    seen = []
+    rep = fly_plan(line_plan(), scn, baselines=True, progress=lambda *x: seen.append(x))
     pid, ff = rep.automated, rep.flights["no_compensation"]
     assert pid.deviation.mean() < 0.15
     assert ff.deviation.mean() > 10 * pid.deviation.mean()
     assert ff.deviation.mean() > 2.0
+    # One progress stage per flight kind flown, counting its route and then its measurement.
+    kinds = [k for k, done, _ in seen if done == 0]
+    assert kinds == list(rep.flights) and kinds[:2] == ["automated", "no_compensation"]
+    assert [x for x in seen if x[0] == "automated"] == [("automated", i, 2) for i in range(3)]
 
 
 def test_strong_turbulent_wind_blade_pass_stays_close_and_covers_the_blade():

@@ -9,7 +9,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from wtcli.console import err_console
+from wtcli.console import err_console, stage_bars
 from wtcli.errors import SimulationError
 
 FLIGHT_SCHEMA = "wtinspect.flight"
@@ -71,6 +71,17 @@ def _fmt(metric: str, v: float) -> str:
             "deviation_m": f"{v:.2f}"}[metric]
 
 
+def _fly_stage_text() -> dict[str, str]:
+    """What the progress bars of ``run_scenario`` are called: the planner's stages (for the
+    plan and the fixed-pattern baseline's plan), then one bar per flight kind."""
+    from wtcli.commands.plan import PLAN_STAGE_TEXT
+
+    text = {**{k: f"plan: {v}" for k, v in PLAN_STAGE_TEXT.items()},
+            **{f"fixed-y {k}": f"fixed-pattern plan: {v}" for k, v in PLAN_STAGE_TEXT.items()}}
+    return {**text, "automated": "automated flight (PID)", "no_compensation": "no wind compensation",
+            "fixed_pattern": "fixed-pattern flight", "manual": "manual pilot"}
+
+
 def register(app: typer.Typer) -> None:
     @app.command("fly")
     def fly(
@@ -103,8 +114,8 @@ def register(app: typer.Typer) -> None:
         if paper:
             from wtcli.fly.run import mean_changes, paper_table
 
-            with err_console.status("flying the paper's four scenarios..."):
-                rows = paper_table(seed=seed)
+            with stage_bars({"scenarios": "the paper's scenarios, planned and flown"}) as progress:
+                rows = paper_table(seed=seed, progress=progress)
             means = mean_changes(rows)
             doc = document(PAPER_TABLE_SCHEMA, 1, {"rows": [r.to_dict() for r in rows],
                                                    "mean_change": means})
@@ -123,8 +134,8 @@ def register(app: typer.Typer) -> None:
         scn = load_scenario(resolve_scenario(scenario))
         if seed is not None:
             scn = scn.with_seed(seed)
-        with err_console.status(f"flying {scn.name}..."):
-            report = run_scenario(scn, plan, baselines=baselines)
+        with stage_bars(_fly_stage_text()) as progress:
+            report = run_scenario(scn, plan, baselines=baselines, progress=progress)
         doc = document(FLIGHT_SCHEMA, FLIGHT_VERSION, report.to_dict())
         if out is not None:
             write_json(out, doc)

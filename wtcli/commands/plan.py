@@ -7,7 +7,7 @@ from typing import List, Optional
 
 import typer
 
-from wtcli.console import err_console
+from wtcli.console import err_console, stage_bars
 from wtcli.errors import ConfigError
 from wtcli.jsonio import dumps
 from wtcli.plan_file import PLAN_SCHEMA, PLAN_VERSION, write_plan
@@ -29,25 +29,8 @@ def _pose(text: str | None):
 
 
 # What each of plan_mission's stages (wtcli.plan.mission.STAGES) does, for the progress bar.
-_STAGE_TEXT = {"turbines": "trajectories", "legs": "legs between turbines", "routes": "UAV routes",
+PLAN_STAGE_TEXT = {"turbines": "trajectories", "legs": "legs between turbines", "routes": "UAV routes",
                "coverage": "coverage check"}
-
-
-def _plan_with_progress(mission, azimuths, pattern: str, jobs: int | None):
-    """plan_mission with a progress bar on stderr, one line per stage (transient)."""
-    from wtcli.console import make_progress
-    from wtcli.plan.mission import plan_mission
-
-    with make_progress(transient=True) as bar:
-        tasks: dict[str, int] = {}
-
-        def progress(stage: str, done: int, total: int) -> None:
-            if stage not in tasks:
-                tasks[stage] = bar.add_task(_STAGE_TEXT.get(stage, stage), total=total, status="")
-            bar.update(tasks[stage], completed=done)
-
-        return plan_mission(mission, azimuths=azimuths, pattern=pattern, workers=jobs,
-                            progress=progress)
 
 
 def register(app: typer.Typer) -> None:
@@ -87,7 +70,7 @@ def register(app: typer.Typer) -> None:
         from wtcli.plan.angles import blade_azimuths
         from wtcli.plan.config import load_mission
         from wtcli.plan.exports import export_all
-        from wtcli.plan.mission import PATTERNS
+        from wtcli.plan.mission import PATTERNS, plan_mission
         from wtcli.plan.picture import draw_plan
 
         if pattern not in PATTERNS:
@@ -97,7 +80,9 @@ def register(app: typer.Typer) -> None:
         for tid, src in sources.items():
             err_console.print(f"{tid}: blade azimuths "
                               f"{', '.join(f'{a:.1f}' for a in azimuths[tid])} deg from {src}")
-        result = _plan_with_progress(mission, azimuths or None, pattern, jobs)
+        with stage_bars(PLAN_STAGE_TEXT) as progress:
+            result = plan_mission(mission, azimuths=azimuths or None, pattern=pattern, workers=jobs,
+                                  progress=progress)
         doc = document(PLAN_SCHEMA, PLAN_VERSION, result.to_dict())
         if out is not None:
             write_plan(out, result)

@@ -11,11 +11,13 @@ coverage of the blade surfaces from the photos actually taken, GSD, time, length
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from wtcli.console import StageProgress, stage_ticker
 from wtcli.fly.pilot import manual_route, ou_series, pilot_inputs
 from wtcli.fly.scenario import Scenario
 from wtcli.fly.sim import G, Reference, Track, fly, make_reference
@@ -433,8 +435,14 @@ def _coverage(plan: Plan, cam: Camera, pos: np.ndarray, rots: np.ndarray,
 
 # ---- the whole run ---------------------------------------------------------------------------
 
-def fly_routes(plan: Plan, scn: Scenario, ground: Ground, mode: str) -> list[UavFlight]:
-    return [fly_route(r, scn, ground, i, mode) for i, r in enumerate(plan.routes)]
+def fly_routes(plan: Plan, scn: Scenario, ground: Ground, mode: str,
+               tick: Callable[[], None] | None = None) -> list[UavFlight]:
+    out = []
+    for i, r in enumerate(plan.routes):
+        out.append(fly_route(r, scn, ground, i, mode))
+        if tick is not None:
+            tick()
+    return out
 
 
 def make_ground(plan: Plan, scn: Scenario) -> Ground:
@@ -483,26 +491,30 @@ class FlightReport:
 
 
 def fly_plan(plan: Plan, scn: Scenario, baselines: bool = False, fixed_plan: Plan | None = None,
-             plan_source: str | None = None) -> FlightReport:
-    """Fly ``plan`` (and the baselines the scenario enables, if ``baselines``)."""
+             plan_source: str | None = None, progress: StageProgress | None = None) -> FlightReport:
+    """Fly ``plan`` (and the baselines the scenario enables, if ``baselines``).
+
+    progress: ``progress(kind, done, total)`` per flight kind (FLIGHT_KINDS), counting its
+    routes flown and then its measurement (total: routes + 1)."""
     ground = make_ground(plan, scn)
-    flights = {"automated": measure("automated", "pid", plan, fly_routes(plan, scn, ground, "pid"),
-                                    scn, ground, planned_coverage=True)}
     notes = []
+    todo = [("automated", "pid", plan)]
     if baselines and scn.baselines.no_compensation:
-        flights["no_compensation"] = measure(
-            "no_compensation", "feedforward", plan, fly_routes(plan, scn, ground, "feedforward"),
-            scn, ground)
+        todo.append(("no_compensation", "feedforward", plan))
     if baselines and scn.baselines.fixed_pattern:
         if fixed_plan is None:
             notes.append("fixed_pattern baseline skipped: it needs the scenario's mission to plan")
         else:
-            flights["fixed_pattern"] = measure(
-                "fixed_pattern", "pid", fixed_plan, fly_routes(fixed_plan, scn, ground, "pid"),
-                scn, ground)
+            todo.append(("fixed_pattern", "pid", fixed_plan))
     if baselines and scn.baselines.manual:
-        flights["manual"] = measure("manual", "pilot", plan,
-                                    fly_routes(plan, scn, ground, "pilot"), scn, ground)
+        todo.append(("manual", "pilot", plan))
+    flights = {}
+    for kind, mode, p in todo:
+        tick = stage_ticker(progress, kind, len(p.routes) + 1)
+        flights[kind] = measure(kind, mode, p, fly_routes(p, scn, ground, mode, tick), scn, ground,
+                                planned_coverage=kind == "automated")
+        if tick is not None:
+            tick()
     return FlightReport(scenario=scn, flights=flights, plan_source=plan_source, notes=notes)
 
 

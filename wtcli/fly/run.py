@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from wtcli.console import StageProgress, stage_ticker
 from wtcli.errors import ConfigError
 from wtcli.fly.flight import FlightReport, fly_plan
 from wtcli.fly.scenario import Scenario, load_scenario, shipped_scenarios
@@ -23,7 +24,8 @@ PAPER_STATED = {"time_min": -78.0, "length_m": -17.0, "coverage_pct": 6.0, "devi
 METRICS = ("time_min", "length_m", "coverage_pct", "deviation_m")
 
 
-def plan_from_mission(scn: Scenario, pattern: str = "adaptive") -> Plan:
+def plan_from_mission(scn: Scenario, pattern: str = "adaptive",
+                      progress: StageProgress | None = None) -> Plan:
     """Plan the scenario's mission with the planner (``wtcli.plan``)."""
     if scn.mission is None:
         raise ConfigError(f"{scn.source or scn.name}: the scenario names no 'mission' file; give "
@@ -32,27 +34,31 @@ def plan_from_mission(scn: Scenario, pattern: str = "adaptive") -> Plan:
     from wtcli.plan.mission import plan_mission
 
     mission = load_mission(scn.mission)
-    return plan_mission(mission, azimuths=scn.azimuths, pattern=pattern)
+    return plan_mission(mission, azimuths=scn.azimuths, pattern=pattern, progress=progress)
 
 
 def run_scenario(scn: Scenario, plan_path: str | Path | None = None, baselines: bool = False,
-                 ) -> FlightReport:
-    """Fly a plan file (or the plan of the scenario's mission) and, optionally, the baselines."""
+                 progress: StageProgress | None = None) -> FlightReport:
+    """Fly a plan file (or the plan of the scenario's mission) and, optionally, the baselines.
+    ``progress``: the planner's stages (``wtcli.plan.mission.STAGES``) where it plans, then
+    ``fly_plan``'s."""
     if plan_path is not None:
         plan = read_plan(plan_path)
         source = str(plan_path)
     else:
-        plan = plan_from_mission(scn)
+        plan = plan_from_mission(scn, progress=progress)
         source = f"planned from {scn.mission}"
     fixed = None
     notes = []
     if baselines and scn.baselines.fixed_pattern and scn.mission is not None:
-        fixed = plan_from_mission(scn, pattern="fixed-y")
+        fixed = plan_from_mission(scn, pattern="fixed-y", progress=progress and (
+            lambda stage, done, total: progress(f"fixed-y {stage}", done, total)))
         if not same_site(plan, fixed):
             fixed = None
             notes.append(f"fixed_pattern baseline skipped: the scenario's mission ({scn.mission}) "
                          "is not the site of the plan")
-    report = fly_plan(plan, scn, baselines=baselines, fixed_plan=fixed, plan_source=source)
+    report = fly_plan(plan, scn, baselines=baselines, fixed_plan=fixed, plan_source=source,
+                      progress=progress)
     if notes:
         report = replace(report, notes=[n for n in report.notes
                                         if not n.startswith("fixed_pattern")] + notes)
@@ -93,10 +99,13 @@ class PaperRow:
                     "deviation_max_m": float(self.report.automated.deviation.max())}}
 
 
-def paper_table(names: tuple[str, ...] = PAPER_SCENARIOS, seed: int | None = None) -> list[PaperRow]:
-    """Fly the paper's four scenarios (automated and manual only) and collect Table 1."""
+def paper_table(names: tuple[str, ...] = PAPER_SCENARIOS, seed: int | None = None,
+                progress: StageProgress | None = None) -> list[PaperRow]:
+    """Fly the paper's four scenarios (automated and manual only) and collect Table 1.
+    ``progress``: one stage, "scenarios", counting them."""
     shipped = shipped_scenarios()
     rows = []
+    tick = stage_ticker(progress, "scenarios", len(names))
     for name in names:
         scn = load_scenario(shipped[name])
         if seed is not None:
@@ -112,6 +121,8 @@ def paper_table(names: tuple[str, ...] = PAPER_SCENARIOS, seed: int | None = Non
         rows.append(PaperRow(name=name, label=paper.get("scenario", scn.description),
                              paper={k: paper[k] for k in ("manual", "automated")}, ours=ours,
                              report=report))
+        if tick is not None:
+            tick()
     return rows
 
 

@@ -25,6 +25,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from wtcli.console import StageProgress, stage_ticker
 from wtcli.errors import ConfigError, PlanError
 from wtcli.geometry import Camera, Turbine
 from wtcli.geometry.coverage import Coverage, measure_coverage
@@ -477,27 +478,12 @@ def _map(fn, jobs: list, workers: int | None, tick: Callable[[], None] | None = 
 STAGES = ("turbines", "legs", "routes", "coverage")
 
 
-def _ticker(progress: Callable[[str, int, int], None] | None, stage: str,
-            total: int) -> Callable[[], None] | None:
-    """Report ``stage`` started (0 of ``total``); the returned ``tick()`` reports one more done."""
-    if progress is None:
-        return None
-    progress(stage, 0, total)
-    done = 0
-
-    def tick() -> None:
-        nonlocal done
-        done += 1
-        progress(stage, done, total)
-
-    return tick
-
 
 # ---- the planner -----------------------------------------------------------------------------------------
 def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = None,
                  pattern: str = "adaptive", enforce_safety: bool | None = None,
                  workers: int | None = None,
-                 progress: Callable[[str, int, int], None] | None = None) -> Plan:
+                 progress: StageProgress | None = None) -> Plan:
     """Plan every turbine of ``mission`` for its fleet; see the module docstring.
 
     azimuths: turbine id -> blade rotor azimuths (deg), overriding the YAML.
@@ -539,7 +525,7 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
     links: dict = {}
     notes: list[str] = []
     jobs = [(t, site_plan, pp, mission, pattern, gsd_eval) for t in assumed]
-    tours_done = _map(_tour, jobs, workers, _ticker(progress, "turbines", len(jobs)))
+    tours_done = _map(_tour, jobs, workers, stage_ticker(progress, "turbines", len(jobs)))
     for t, (chunks, tour_links, tour_times) in zip(assumed, tours_done):
         tours[t.id], times[t.id] = chunks, tour_times
         links.update(tour_links)
@@ -570,8 +556,8 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
         build_route(*job, missing=missing)
     legs = {(p.tobytes(), q.tobytes()): (site_plan, p, q, pp.leg_required, s.min_altitude_m)
             for p, q in missing}
-    links.update(_map(_link, list(legs.values()), workers, _ticker(progress, "legs", len(legs))))
-    routes = _map(_route, jobs, workers, _ticker(progress, "routes", len(jobs)))
+    links.update(_map(_link, list(legs.values()), workers, stage_ticker(progress, "legs", len(legs))))
+    routes = _map(_route, jobs, workers, stage_ticker(progress, "routes", len(jobs)))
 
     check = check_routes(routes, site_real, launch, s.safe_distance_m, s.min_altitude_m)
     if enforce_safety and (check["waypoint_violations"] or check["leg_violations"]
@@ -583,7 +569,7 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
     photos = _photos_by_turbine([t.id for t in real], routes)
     sides_all = _map(_side_coverage, [(t, photos[t.id], mission.camera, gsd_eval,
                                        s.coverage_spacing_m, s.max_incidence_deg) for t in real],
-                     workers, _ticker(progress, "coverage", len(real)))
+                     workers, stage_ticker(progress, "coverage", len(real)))
     for t, (sides, average, structure) in zip(real, sides_all):
         vals = [v for d in sides.values() for v in d.values()]
         coverage[t.id] = {"by_blade_side": sides, "blade_average": average,
