@@ -105,7 +105,9 @@ def test_roundtrip_through_file(tmp_path):
     from wtcli.contours import contours_batch
     from wtcli.jsonio import write_json
 
-    batch = contours_batch([tmp_path / "i.json"], 4)
+    seen = []
+    batch = contours_batch([tmp_path / "i.json"], 4, progress=lambda *x: seen.append(x))
+    assert seen == [("images", 0, 1), ("images", 1, 1)]
     write_json(tmp_path / "c.json", batch.to_document())
     (cs, err, img), = read_contours(tmp_path / "c.json")
     assert err is None and img["file_name"] == "a.png"

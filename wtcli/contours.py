@@ -24,6 +24,7 @@ from typing import Any, Iterator
 import cv2
 import numpy as np
 
+from wtcli.console import StageProgress, stage_ticker
 from wtcli.errors import InputError, PerceptionError
 from wtcli.jsonio import document, read_json
 from wtcli.masks import LABELS, Instances, read_instances
@@ -358,11 +359,13 @@ class ContoursBatch:
                          "images": items})
 
 
-def contours_batch(paths: list[Path], area_threshold: float = DEFAULT_AREA_THRESHOLD) -> ContoursBatch:
+def contours_batch(paths: list[Path], area_threshold: float = DEFAULT_AREA_THRESHOLD,
+                   progress: StageProgress | None = None) -> ContoursBatch:
     """``find_contours`` on every image of the input; an image where nothing survives the
-    filter is recorded as failed, the others go on."""
+    filter is recorded as failed, the others go on. ``progress``: stage "images", per image."""
     loaded = load_instances(paths)
     sets, errors, images = [], [], []
+    tick = stage_ticker(progress, "images", len(loaded))
     for img, inst, source in loaded:
         cs = find_contours(inst, area_threshold, image=img, source=source)
         try:
@@ -372,6 +375,8 @@ def contours_batch(paths: list[Path], area_threshold: float = DEFAULT_AREA_THRES
             sets.append(None)
             errors.append(str(e))
         images.append(img)
+        if tick is not None:
+            tick()
     return ContoursBatch(tuple(sets), tuple(errors), tuple(images), loaded[0][2], area_threshold)
 
 

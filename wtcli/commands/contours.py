@@ -7,7 +7,7 @@ from typing import List, Optional
 
 import typer
 
-from wtcli.console import err_console
+from wtcli.console import err_console, stage_bars
 from wtcli.contours import DEFAULT_AREA_THRESHOLD, contours_batch
 from wtcli.errors import PartialFailure, PerceptionError
 from wtcli.jsonio import dumps, write_json
@@ -27,7 +27,8 @@ def register(app: typer.Typer) -> None:
         json_out: bool = typer.Option(False, "--json", help="Print the contours JSON on stdout."),
     ) -> None:
         """Binarise instance masks, find their contours and drop small ones (eq. 4-6)."""
-        batch = contours_batch(inputs, area_threshold)
+        with stage_bars({"images": "contours"}) as progress:
+            batch = contours_batch(inputs, area_threshold, progress)
         doc = batch.to_document()
         if out is not None:
             write_json(out, doc)
