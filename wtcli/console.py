@@ -49,7 +49,12 @@ def stage_ticker(progress: StageProgress | None, stage: str, total: int) -> Call
 @contextmanager
 def stage_bars(texts: dict[str, str]) -> Iterator[StageProgress]:
     """A transient progress bar per stage on stderr; yields the ``progress`` callback to pass
-    on. ``texts``: what each stage is called on screen (else its name)."""
+    on. ``texts``: what each stage is called on screen (else its name). Only on a terminal:
+    in a log (stderr redirected) a bar that vanishes leaves just a blank line before the
+    result or the one-line error."""
+    if not err_console.is_terminal:
+        yield lambda stage, done, total: None
+        return
     with make_progress(transient=True) as bar:
         tasks: dict[str, int] = {}
 
