@@ -52,9 +52,16 @@ def timing(sizes: list[int]) -> list[dict]:
     for n in sizes:
         m = site(n, np.random.default_rng(n))
         t0, c0 = time.perf_counter(), os.times()
-        plan = plan_mission(m)
+        marks: dict[str, float] = {}  # wall time at which each stage started (plan_mission's progress)
+        plan = plan_mission(m, progress=lambda st, done, total: marks.setdefault(
+            st, time.perf_counter()) if done == 0 else None)
         dt = time.perf_counter() - t0
         c1 = os.times()
+        # Each stage's wall time runs to the next one's start; "setup" is before the first
+        # (site model, launch check), the last stage runs to the end (with the plan's summary).
+        ends = list(marks.values())[1:] + [t0 + dt]
+        stages = {"setup": round(next(iter(marks.values()), t0 + dt) - t0, 2)}
+        stages.update({k: round(e - v, 2) for (k, v), e in zip(marks.items(), ends)})
         cpu = (c1.user - c0.user) + (c1.children_user - c0.children_user)
         s = plan.summary
         out.append({"turbines": n, "uavs": len(m.fleet.uavs), "seconds": round(dt, 2),
@@ -62,9 +69,11 @@ def timing(sizes: list[int]) -> list[dict]:
                     "seconds_per_turbine": round(dt / n, 3), "waypoints": sum(len(r) for r in plan.routes),
                     "photos": s["photos"], "length_km": round(s["total_length_m"] / 1000, 2),
                     "mission_time_min": round(s["total_time_s"] / 60, 1),
-                    "min_clearance_m": round(s["min_clearance_m"], 2)})
+                    "min_clearance_m": round(s["min_clearance_m"], 2),
+                    "stage_seconds": stages})
         print(f"{n:4d} turbines, {len(m.fleet.uavs)} UAV(s): {dt:6.2f} s wall, {cpu:6.2f} s CPU "
-              f"({dt / n:.2f} s/turbine), {s['photos']} photos", flush=True)
+              f"({dt / n:.2f} s/turbine), {s['photos']} photos; wall s by stage: "
+              + ", ".join(f"{k} {v:.2f}" for k, v in stages.items()), flush=True)
     return out
 
 
