@@ -31,10 +31,11 @@ def make_progress(transient: bool = False) -> Progress:
 StageProgress = Callable[[str, int, int], None]
 
 
-def stage_ticker(progress: StageProgress | None, stage: str, total: int) -> Callable[[], None] | None:
-    """Report ``stage`` started (0 of ``total``); the returned ``tick()`` reports one more done."""
+def stage_ticker(progress: StageProgress | None, stage: str, total: int) -> Callable[[], None]:
+    """Report ``stage`` started (0 of ``total``); the returned ``tick()`` reports one more done
+    (does nothing without ``progress``)."""
     if progress is None:
-        return None
+        return lambda: None
     progress(stage, 0, total)
     done = 0
 

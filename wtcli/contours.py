@@ -375,8 +375,7 @@ def contours_batch(paths: list[Path], area_threshold: float = DEFAULT_AREA_THRES
             sets.append(None)
             errors.append(str(e))
         images.append(img)
-        if tick is not None:
-            tick()
+        tick()
     return ContoursBatch(tuple(sets), tuple(errors), tuple(images), loaded[0][2], area_threshold)
 
 

@@ -436,12 +436,11 @@ def _coverage(plan: Plan, cam: Camera, pos: np.ndarray, rots: np.ndarray,
 # ---- the whole run ---------------------------------------------------------------------------
 
 def fly_routes(plan: Plan, scn: Scenario, ground: Ground, mode: str,
-               tick: Callable[[], None] | None = None) -> list[UavFlight]:
+               tick: Callable[[], None] = lambda: None) -> list[UavFlight]:
     out = []
     for i, r in enumerate(plan.routes):
         out.append(fly_route(r, scn, ground, i, mode))
-        if tick is not None:
-            tick()
+        tick()
     return out
 
 
@@ -513,8 +512,7 @@ def fly_plan(plan: Plan, scn: Scenario, baselines: bool = False, fixed_plan: Pla
         tick = stage_ticker(progress, kind, len(p.routes) + 1)
         flights[kind] = measure(kind, mode, p, fly_routes(p, scn, ground, mode, tick), scn, ground,
                                 planned_coverage=kind == "automated")
-        if tick is not None:
-            tick()
+        tick()
     return FlightReport(scenario=scn, flights=flights, plan_source=plan_source, notes=notes)
 
 

@@ -121,8 +121,7 @@ def paper_table(names: tuple[str, ...] = PAPER_SCENARIOS, seed: int | None = Non
         rows.append(PaperRow(name=name, label=paper.get("scenario", scn.description),
                              paper={k: paper[k] for k in ("manual", "automated")}, ours=ours,
                              report=report))
-        if tick is not None:
-            tick()
+        tick()
     return rows
 
 

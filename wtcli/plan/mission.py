@@ -449,34 +449,30 @@ def _side_coverage(job: tuple) -> tuple[dict, float, float]:
     return cov.by_blade_side(), cov.blade_average(), cov.structure_fraction()
 
 
-def _map(fn, jobs: list, workers: int | None, tick: Callable[[], None] | None = None) -> list:
+def _map(fn, jobs: list, workers: int | None, tick: Callable[[], None] = lambda: None) -> list:
     """``[fn(j) for j in jobs]``, in worker processes from 8 jobs on (or ``workers`` of them);
     ``tick()`` after each result, in order."""
     if workers is None:
         workers = (os.cpu_count() or 1) if len(jobs) >= 8 else 1
     workers = max(1, min(workers, len(jobs)))
-    out = []
-    if workers == 1:
-        results = map(fn, jobs)
-    else:
-        import multiprocessing as mp
 
-        ex = ProcessPoolExecutor(workers, mp_context=mp.get_context("fork"))
-        results = ex.map(fn, jobs, chunksize=max(1, len(jobs) // (4 * workers)))
-    try:
+    def collect(results) -> list:
+        out = []
         for r in results:
             out.append(r)
-            if tick is not None:
-                tick()
-    finally:
-        if workers > 1:
-            ex.shutdown(cancel_futures=True)
-    return out
+            tick()
+        return out
+
+    if workers == 1:
+        return collect(map(fn, jobs))
+    import multiprocessing as mp
+
+    with ProcessPoolExecutor(workers, mp_context=mp.get_context("fork")) as ex:
+        return collect(ex.map(fn, jobs, chunksize=max(1, len(jobs) // (4 * workers))))
 
 
 # The stages plan_mission reports to its ``progress`` callback, in order.
 STAGES = ("turbines", "legs", "routes", "coverage")
-
 
 
 # ---- the planner -----------------------------------------------------------------------------------------
