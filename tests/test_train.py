@@ -127,3 +127,42 @@ def test_synthetic_scenes_follow_the_seed(tmp_path, seed, monkeypatch):
 def test_cli_train_sizes_not_numbers_exit_3(cli, tmp_path):
     res = cli("train", "--sizes", "384,big", "--out", tmp_path / "r")
     assert res.exit_code == ExitCode.INPUT and "--sizes" in res.output
+
+
+def test_progress_in_a_log_is_a_line_per_checkpoint(capsys):
+    """Not on a terminal (a batch server's log) the run still tells its progress: a line at the
+    first step, then every --checkpoint-every steps; the share done follows whichever end
+    comes first, the iterations or --max-minutes (as the LR schedule)."""
+    from wtcli.commands.train import _Report
+
+    for max_minutes, shares in ((10, ["1 %", "52 %", "100 %", "100 %"]),
+                                (None, ["0 %", "10 %", "20 %", "30 %"])):
+        r = _Report(iterations=1000, max_minutes=max_minutes, every=100)
+        for it in range(1, 302):
+            r.step({"iteration": it, "loss": 0.8, "lr": 1e-4, "loss_mask": 0.2,
+                    "loss_classifier": 0.1, "elapsed_s": 3.1 * it})
+        r.close()
+        lines = capsys.readouterr().err.splitlines()
+        assert [line.split(",")[0] for line in lines] == [f"train: step {k}" for k in (1, 101, 201, 301)]
+        assert [line.split(", ")[1].split(" of")[0] for line in lines] == shares
+        assert "loss 0.800 (mask 0.200, cls 0.100)" in lines[1] and "3.10 s/step" in lines[1]
+        assert "s/step" not in lines[0]
+
+
+def test_progress_on_a_terminal_is_a_bar(monkeypatch):
+    import io
+
+    from rich.console import Console
+
+    import wtcli.console
+    from wtcli.commands.train import _Report
+
+    buf = io.StringIO()
+    monkeypatch.setattr(wtcli.console, "err_console", Console(file=buf, force_terminal=True, width=160))
+    r = _Report(iterations=1000, max_minutes=10, every=100)
+    for it in range(1, 51):  # a resumed run: the bar starts where the run stands
+        r.step({"iteration": 500 + it, "loss": 0.8, "lr": 1e-4, "elapsed_s": 290.0 + 0.1 * it})
+    r.close()
+    out = buf.getvalue()
+    assert "train" in out and "55%" in out and "step 550 loss 0.800" in out
+    assert "train: step" not in out  # no log lines on a terminal

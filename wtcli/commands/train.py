@@ -51,7 +51,7 @@ def train(
     """Train the blade/tower/nacelle Mask R-CNN; resumable; evaluates at the end."""
     from rich.table import Table
 
-    from wtcli.console import err_console, make_progress
+    from wtcli.console import err_console
     from wtcli.errors import InputError
     from wtcli.jsonio import document, dumps
     from wtcli.segment.model import TRAIN_MIN_SIZES
@@ -73,15 +73,11 @@ def train(
                       checkpoint_every=checkpoint_every, eval_count=eval_count,
                       val=str(val) if val else None, device=device, workers=workers, threads=threads,
                       augment=not no_augment, stops=stops, resume=resume, train_sizes=train_sizes)
-    with make_progress() as progress:
-        task = progress.add_task("train", total=iterations, status="")
-
-        def step(rec: dict) -> None:
-            progress.update(task, completed=rec["iteration"],
-                            status=f"loss {rec['loss']:.3f} (mask {rec.get('loss_mask', 0):.3f}, "
-                                   f"cls {rec.get('loss_classifier', 0):.3f}) lr {rec['lr']:.1e}")
-
-        summary = run_training(cfg, progress=step)
+    report = _Report(iterations, max_minutes, checkpoint_every)
+    try:
+        summary = run_training(cfg, progress=report.step)
+    finally:
+        report.close()
     ev = summary.get("evaluation") or {}
     if ev:
         table = Table(title=f"evaluation on {ev.get('images')} held-out image(s)", title_justify="left")
@@ -96,6 +92,67 @@ def train(
                       f"{summary['checkpoint']}")
     if json_out:
         typer.echo(dumps(document(TRAIN_SCHEMA, 1, summary)))
+
+
+class _Report:
+    """What a person sees while a run trains (hours on a CPU). On a terminal: a bar that fills
+    as the run's end nears (the iterations or ``--max-minutes``, whichever comes first, as the
+    learning-rate schedule) with the step and the losses. In a log (a batch server, ``nohup``):
+    a plain line at the first step and then every ``--checkpoint-every`` steps, since a bar
+    would print nothing there until the end."""
+
+    def __init__(self, iterations: int, max_minutes: float | None, every: int) -> None:
+        self.iterations, self.every = iterations, max(1, every)
+        self.budget_s = 60.0 * max_minutes if max_minutes else None
+        self.bar = self.task = None
+        self.last: tuple[int, float] | None = None  # (iteration, elapsed s) of the last line
+
+    def share(self, rec: dict) -> float:
+        share = rec["iteration"] / self.iterations
+        if self.budget_s:
+            share = max(share, rec["elapsed_s"] / self.budget_s)
+        return min(share, 1.0)
+
+    @staticmethod
+    def losses(rec: dict) -> str:
+        return (f"loss {rec['loss']:.3f} (mask {rec.get('loss_mask', 0):.3f}, "
+                f"cls {rec.get('loss_classifier', 0):.3f}) lr {rec['lr']:.1e}")
+
+    def step(self, rec: dict) -> None:
+        from wtcli.console import err_console
+
+        if err_console.is_terminal:
+            self._bar(rec)
+            return
+        it, el = rec["iteration"], rec["elapsed_s"]
+        if self.last is not None and it - self.last[0] < self.every:
+            return
+        pace = f", {(el - self.last[1]) / (it - self.last[0]):.2f} s/step" if self.last else ""
+        end = (f"{self.iterations} steps or {self.budget_s / 60:g} min" if self.budget_s
+               else f"{self.iterations} steps")
+        err_console.print(f"train: step {it}, {100 * self.share(rec):.0f} % of the run ({end}), "
+                          f"{self.losses(rec)}{pace}, {el / 60:.1f} min trained", soft_wrap=True)
+        self.last = (it, el)
+
+    def _bar(self, rec: dict) -> None:
+        from rich.progress import (BarColumn, Progress, TaskProgressColumn, TextColumn,
+                                   TimeElapsedColumn, TimeRemainingColumn)
+
+        from wtcli.console import err_console
+
+        status = f"step {rec['iteration']} {self.losses(rec)}"
+        if self.bar is None:  # started at the first step, so a resumed run's ETA is its own pace
+            self.bar = Progress(TextColumn("[bold]train"), BarColumn(), TaskProgressColumn(),
+                                TextColumn("{task.fields[status]}"), TimeElapsedColumn(),
+                                TimeRemainingColumn(), console=err_console)
+            self.bar.start()
+            self.task = self.bar.add_task("train", total=1.0, completed=self.share(rec), status=status)
+        else:
+            self.bar.update(self.task, completed=self.share(rec), status=status)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()
 
 
 def register(app: typer.Typer) -> None:

@@ -234,7 +234,7 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
                    **{k: v.item() for k, v in losses.items()}}
             history.append(rec)
             if progress:
-                progress({**rec, "total": cfg.iterations, "elapsed_s": elapsed})
+                progress({**rec, "total": cfg.iterations, "elapsed_s": elapsed0 + time.monotonic() - t0})
             if it - last_ckpt_it >= cfg.checkpoint_every:
                 _save_ckpt(ckpt_path, model, opt, it, cfg, elapsed0 + time.monotonic() - t0, history)
                 last_ckpt_it = it
