@@ -199,6 +199,10 @@ def test_segment_bad_file_in_folder_exits_9_and_goes_on(cli, photo_folder, rando
     assert "broken.jpg" in next(r["error"] for r in report["images"] if r["status"] == "error")
     assert len(read_instances(out / "instances.json")) == 2
     assert "1 of 3 images failed" in res.stderr
+    # Not on a terminal (a log): a progress line per tenth of the batch, here one per file.
+    lines = [ln for ln in res.stderr.splitlines() if ln.startswith("segment: ")]
+    assert [ln.split(" (")[0] for ln in lines] == ["segment: 1/3", "segment: 2/3", "segment: 3/3"]
+    assert "broken.jpg error" in lines[2] and "s each" in lines[2]
 
 
 def test_segment_single_bad_inputs(cli, tmp_path, random_weights):

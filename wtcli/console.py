@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
@@ -24,6 +26,31 @@ def make_progress(transient: bool = False) -> Progress:
         console=err_console,
         transient=transient,
     )
+
+
+@contextmanager
+def count_bar(description: str, total: int) -> Iterator[Callable[..., None]]:
+    """Progress over ``total`` items (photos, renders); yields ``advance(status="")``, called
+    once per item done. On a terminal, a bar. In a log (stderr redirected: a batch server,
+    ``nohup``) a bar shows nothing until the end, so a line at every tenth of the way instead
+    (none for a single item)."""
+    if err_console.is_terminal:
+        with make_progress() as bar:
+            task = bar.add_task(description, total=total, status="")
+            yield lambda status="": bar.update(task, advance=1, status=status)
+        return
+    t0, done, every = time.monotonic(), 0, max(1, math.ceil(total / 10))
+
+    def advance(status: str = "") -> None:
+        nonlocal done
+        done += 1
+        if total > 1 and (done % every == 0 or done == total):
+            took = time.monotonic() - t0
+            err_console.print(f"{description}: {done}/{total} ({100 * done / total:.0f} %), "
+                              f"{took:.0f} s, {took / done:.2f} s each"
+                              + (f", last: {status}" if status else ""), soft_wrap=True)
+
+    yield advance
 
 
 # A long computation in stages reports ``progress(stage, done, total)``: once with done 0 when a

@@ -34,7 +34,7 @@ def segment(
     """Segment photos into blade, tower and nacelle instances (paper step 1)."""
     from rich.table import Table
 
-    from wtcli.console import err_console, make_progress
+    from wtcli.console import count_bar, err_console
     from wtcli.errors import InputError, PartialFailure
     from wtcli.jsonio import dumps
     from wtcli.segment.batch import find_images, segment_paths, write_batch_files
@@ -51,13 +51,9 @@ def segment(
         inst = predict(net, img, score_threshold=score_threshold, max_size=max_size)
         return second_look(net, img, inst, score_threshold, max_size) if zoom else inst
 
-    with make_progress() as progress:
-        task = progress.add_task("segment", total=len(files), status="")
-
-        def step(res) -> None:
-            progress.update(task, advance=1, status=f"{res.rel} {res.status}")
-
-        results = segment_paths(path, out, run, recursive=recursive, resume=resume, on_progress=step)
+    with count_bar("segment", len(files)) as advance:
+        results = segment_paths(path, out, run, recursive=recursive, resume=resume,
+                                on_progress=lambda res: advance(f"{res.rel} {res.status}"))
     settings = {"score_threshold": score_threshold, "max_size": max_size, "zoom": zoom,
                 "model": str(weights),
                 "device": str(next(net.parameters()).device)}

@@ -575,11 +575,10 @@ def render_dataset(out_dir: str | Path, count: int, seed: int, width: int = 640,
                 on_image(i)
 
     if progress:
-        from wtcli.console import make_progress
+        from wtcli.console import count_bar
 
-        with make_progress() as bar:
-            task = bar.add_task("rendering", total=count, status="")
-            run(lambda: bar.advance(task))
+        with count_bar("rendering", count) as advance:
+            run(advance)
     else:
         run(lambda: None)
 
