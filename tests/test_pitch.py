@@ -318,6 +318,46 @@ def test_a_far_rotor_right_behind_the_hub():
         pitch_from_instances(inst)
 
 
+def test_any_count_still_trims_a_far_rotor_right_behind_the_hub():
+    """With any count accepted (how plan reads a photo first), a rotor has 3 blades unless told
+    otherwise: a far rotor's clearly shorter blades on the same hub are still left out."""
+    h = w = 400
+    main = rotor(h, w, [10, 130, 250], 12, length=170, nacelle=True)
+    far = rotor(h, w, [60, 180, 300], 6, length=110, nacelle=False)
+    inst = Instances(np.concatenate([main.labels, far.labels]),
+                     np.concatenate([main.masks, far.masks]))
+    res = pitch_from_instances(inst, expected_blades=None)
+    assert sorted(round(p) for p in res.phis) == [10, 130, 250]
+    res = pitch_from_instances(inst, expected_blades=None, rotor_blades=6)  # a 6-blade rotor
+    assert len(res.blades) == 6
+
+
+def test_hub_out_of_frame_beats_a_far_rotor():
+    """A close-up with the inspected hub above the frame (held-out-like render 7 000 184): its
+    blades, cut by the frame at their roots, outweigh a small far rotor in full view, and are
+    the ones measured. A far blade that only reaches the frame with its tip is not one of them."""
+    h, w = 400, 500
+    # The hub is so far above that the blades' axes cross beyond reach of their visible ends.
+    main = rotor(h, w, [240, 300], 20, hub=(250, -200), length=450, nacelle=False)
+    far = rotor(h, w, [90, 210, 330], 4, hub=(420, 300), length=50, nacelle=True)
+    tip_cut = make_blade_mask(h, w, 90, 5, length=70, hub=(90, 60), start=4)  # reaches y = 0
+    inst = Instances(np.concatenate([main.labels, far.labels, ["blade"]]),
+                     np.concatenate([main.masks, far.masks, tip_cut[None]]))
+    res = pitch_from_instances(inst, expected_blades=None)
+    assert sorted(round(p) for p in res.phis) == [240, 300]
+    assert sorted(res.other_rotor_blades) == [2, 3, 4, 6]
+    # A long dark streak read as a blade (the tower's shadow, render 7 000 328), cut by the frame
+    # at its wide end, is no close-up blade when it is not far longer than the rotor's.
+    full = rotor(h, w, [30, 150, 270], 10, hub=(250, 120), length=110, nacelle=True)
+    shadow = make_blade_mask(h, w, 70, 24, length=300, hub=(180, 490), taper=0.5, start=0)
+    inst = Instances(np.concatenate([full.labels, ["blade"]]), np.concatenate([full.masks, shadow[None]]))
+    res = pitch_from_instances(inst, expected_blades=None)
+    assert sorted(round(p) for p in res.phis) == [30, 150, 270]
+    # Without the close-up blades the far rotor is all there is, and it is measured.
+    alone = Instances(np.concatenate([far.labels, ["blade"]]), np.concatenate([far.masks, tip_cut[None]]))
+    assert sorted(round(p) for p in pitch_from_instances(alone, expected_blades=None).phis) == [90, 210, 330]
+
+
 def test_a_far_nacelle_never_turns_the_blades_around():
     h = w = 400
     main = rotor(h, w, [10, 130, 250], 12, length=150, nacelle=False)

@@ -64,6 +64,7 @@ CANDIDATE_FLOOR = 0.2  # lowest score a blade may be admitted at (seeds 9 500 00
 SLOT_TOLERANCE_DEG = 25.0  # as plan's MAX_SPACING_ERROR_DEG: the rotor's gaps within this of even
 CANDIDATE_INSIDE = 0.3  # a candidate this much inside a counted blade is that blade again
 DEFAULT_ROTOR_BLADES = 3
+CLOSE_UP_LENGTH = 3.0  # a blade this much longer than a rotor's is of a far nearer turbine
 
 
 # ---- angles and classes ------------------------------------------------------------------------
@@ -288,6 +289,14 @@ def _touches_border(inst: InstanceContours, image_size: tuple[int, int]) -> bool
     return x0 <= 0 or y0 <= 0 or x1 >= image_size[1] or y1 >= image_size[0]
 
 
+def _root_at_border(inst: InstanceContours, ax: Axis, width: float,
+                    image_size: tuple[int, int]) -> bool:
+    """The blade's wider (root) end lies at the frame's edge: its hub is out of frame."""
+    x, y = wider_end(inst, ax)
+    h, w = image_size
+    return min(x, y, w - x, h - y) <= 2.0 + width
+
+
 def select_rotor(blades: ContourSet, axes: list[Axis],
                  nacelle_points: list[np.ndarray]) -> tuple[list[int], np.ndarray | None]:
     """The blades of the main rotor when a photo shows several turbines.
@@ -324,6 +333,16 @@ def select_rotor(blades: ContourSet, axes: list[Axis],
         key = (sum(areas[k] for k in sup), len(sup))
         if best_key is None or key > best_key:
             best, best_key, best_c = sup, key, c
+    if best_c is not None:
+        # A close-up may leave the inspected turbine's hub out of frame: blades cut by the frame
+        # at their root end, not meeting the rotor found, are that turbine's when they outweigh
+        # the rotor and one is far longer than its blades (much nearer: the rotor is a far one;
+        # a shadow or the tower's edge read as a blade is seldom that long).
+        cut = [k for k in range(n) if k not in best
+               and _root_at_border(blades.instances[k], axes[k], widths[k], blades.image_size)]
+        if (cut and sum(areas[k] for k in cut) > sum(areas[k] for k in best)
+                and max(lengths[k] for k in cut) >= CLOSE_UP_LENGTH * max(lengths[k] for k in best)):
+            return cut, None
     if best_c is not None and len(best) > 1:
         big = max(areas[k] for k in best)
         keep = []
@@ -537,8 +556,10 @@ def measure_pitch(contours: ContourSet, expected_blades: int | None = 3,
     all_axes = [principal_axis(b) for b in all_blades]
     nacelles = contours.of("nacelle")
     keep, candidate = select_rotor(all_blades, all_axes, [_region_centroid(n) for n in nacelles])
-    if expected_blades and len(keep) > expected_blades:
-        keep = _longest_if_clearly(keep, all_axes, expected_blades)
+    n_rotor = rotor_blades or expected_blades or DEFAULT_ROTOR_BLADES
+    trim_to = expected_blades or n_rotor  # also when any count is accepted: a rotor has n_rotor
+    if len(keep) > trim_to:
+        keep = _longest_if_clearly(keep, all_axes, trim_to)
     blades = all_blades[keep]
     others = tuple(all_blades.instances[i].source_index for i in range(len(all_blades))
                    if i not in keep)
@@ -565,7 +586,6 @@ def measure_pitch(contours: ContourSet, expected_blades: int | None = 3,
         hub, source = wider_end(blades.instances[0], axes[0]), "blade_taper"
 
     out = [_blade_pitch(inst, ax, hub) for inst, ax in zip(blades, axes)]
-    n_rotor = rotor_blades or expected_blades or DEFAULT_ROTOR_BLADES
     rotor = _without_doubles(out, n_rotor)
     if len(rotor) < len(out):  # the doubles are left out like other rotors' blades
         kept = {b.source_index for b in rotor}
