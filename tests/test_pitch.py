@@ -332,6 +332,23 @@ def test_any_count_still_trims_a_far_rotor_right_behind_the_hub():
     assert len(res.blades) == 6
 
 
+def test_a_tower_read_as_a_blade_under_a_close_up_hub():
+    """A close-up's tower, read as a blade (dev render 7 000 240): it meets the hub like a blade
+    but widens away from it, so it is left out when the hub has one blade too many. A real
+    blade tapers to its tip and stays."""
+    h = w = 400
+    main = rotor(h, w, [90, 210, 330], 14, hub=(200, 150), length=140, nacelle=True)
+    tower = make_blade_mask(h, w, 90, 40, length=235, hub=(200, 400), taper=0.45, start=0)
+    inst = Instances(np.concatenate([main.labels, ["blade"]]), np.concatenate([main.masks, tower[None]]))
+    res = pitch_from_instances(inst, expected_blades=None)
+    assert sorted(round(p) for p in res.phis) == [90, 210, 330]
+    assert res.other_rotor_blades == (4,)
+    blade = make_blade_mask(h, w, 270, 14, length=140, hub=(200, 150))  # a fourth, tapering one
+    inst = Instances(np.concatenate([main.labels, ["blade"]]), np.concatenate([main.masks, blade[None]]))
+    with pytest.raises(PerceptionError, match="found 4 blades"):
+        pitch_from_instances(inst)
+
+
 def test_hub_out_of_frame_beats_a_far_rotor():
     """A close-up with the inspected hub above the frame (held-out-like render 7 000 184): its
     blades, cut by the frame at their roots, outweigh a small far rotor in full view, and are

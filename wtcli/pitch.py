@@ -384,6 +384,20 @@ def _without_doubles(out: list[BladePitch], n: int,
     return best
 
 
+def _without_wide_tips(keep: list[int], blades: ContourSet, axes: list[Axis],
+                       hub: np.ndarray) -> list[int]:
+    """Too many blades on one hub: one clearly wider at its end away from the hub is not a
+    blade (blades taper to the tip) but the tower under a close-up's hub, read as a blade."""
+    out = []
+    for k in keep:
+        root = wider_end(blades.instances[k], axes[k], decisive=True)
+        ends = (axes[k].point(axes[k].t_min), axes[k].point(axes[k].t_max))
+        far = max(ends, key=lambda e: float(np.linalg.norm(e - hub)))
+        if root is None or not np.allclose(root, far):
+            out.append(k)
+    return out
+
+
 def _longest_if_clearly(keep: list[int], axes: list[Axis], n: int) -> list[int]:
     """Too many blades on one hub: a far turbine right behind it shows shorter blades. Keep the
     ``n`` longest when each is at least 1.25x as long as every other; else keep all (and the
@@ -560,6 +574,8 @@ def measure_pitch(contours: ContourSet, expected_blades: int | None = 3,
     trim_to = expected_blades or n_rotor  # also when any count is accepted: a rotor has n_rotor
     if len(keep) > trim_to:
         keep = _longest_if_clearly(keep, all_axes, trim_to)
+    if len(keep) > trim_to and candidate is not None:
+        keep = _without_wide_tips(keep, all_blades, all_axes, candidate)
     blades = all_blades[keep]
     others = tuple(all_blades.instances[i].source_index for i in range(len(all_blades))
                    if i not in keep)
