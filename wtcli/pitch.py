@@ -307,7 +307,9 @@ def select_rotor(blades: ContourSet, axes: list[Axis],
     most pixels wins (the inspected turbine is the nearest, largest one). A small supporter
     (< 30 % of the largest one's pixels, not cut by the frame) whose wider end is away from the
     hub is a far turbine's blade pointing at it, and is left out. Without any candidate (one
-    blade; two in line and no nacelle) every blade is kept."""
+    blade; two in line and no nacelle) every blade is kept. In a close-up with the hub out of
+    frame, the blades cut at their root by the frame win over a far rotor (see the code), and
+    the hub returned is None."""
     n = len(axes)
     areas = [float(b.area) for b in blades]
     lengths = [max(ax.t_max - ax.t_min, 1.0) for ax in axes]
