@@ -350,7 +350,7 @@ def test_a_tower_read_as_a_blade_under_a_close_up_hub():
 
 
 def test_hub_out_of_frame_beats_a_far_rotor():
-    """A close-up with the inspected hub above the frame (held-out-like render 7 000 184): its
+    """A close-up with the inspected hub above the frame (dev render 7 000 184): its
     blades, cut by the frame at their roots, outweigh a small far rotor in full view, and are
     the ones measured. A far blade that only reaches the frame with its tip is not one of them."""
     h, w = 400, 500

@@ -289,6 +289,15 @@ def _touches_border(inst: InstanceContours, image_size: tuple[int, int]) -> bool
     return x0 <= 0 or y0 <= 0 or x1 >= image_size[1] or y1 >= image_size[0]
 
 
+def _wide_end_away(inst: InstanceContours, ax: Axis, hub: np.ndarray, decisive: bool = False) -> bool:
+    """The region's wider end (``wider_end``) is its axis end farther from ``hub``: not how a
+    blade of that hub looks (its root is the wide end)."""
+    root = wider_end(inst, ax, decisive)
+    ends = (ax.point(ax.t_min), ax.point(ax.t_max))
+    far = max(ends, key=lambda e: float(np.linalg.norm(e - hub)))
+    return root is not None and bool(np.allclose(root, far))
+
+
 def _root_at_border(inst: InstanceContours, ax: Axis, width: float,
                     image_size: tuple[int, int]) -> bool:
     """The blade's wider (root) end lies at the frame's edge: its hub is out of frame."""
@@ -351,10 +360,7 @@ def select_rotor(blades: ContourSet, axes: list[Axis],
         for k in best:
             inst = blades.instances[k]
             if areas[k] < 0.3 * big and not _touches_border(inst, blades.image_size):
-                root = wider_end(inst, axes[k])
-                ends = (axes[k].point(axes[k].t_min), axes[k].point(axes[k].t_max))
-                far = max(ends, key=lambda e: float(np.linalg.norm(e - best_c)))
-                if np.allclose(root, far):
+                if _wide_end_away(inst, axes[k], best_c):
                     continue
             keep.append(k)
         best = keep
@@ -390,14 +396,7 @@ def _without_wide_tips(keep: list[int], blades: ContourSet, axes: list[Axis],
                        hub: np.ndarray) -> list[int]:
     """Too many blades on one hub: one clearly wider at its end away from the hub is not a
     blade (blades taper to the tip) but the tower under a close-up's hub, read as a blade."""
-    out = []
-    for k in keep:
-        root = wider_end(blades.instances[k], axes[k], decisive=True)
-        ends = (axes[k].point(axes[k].t_min), axes[k].point(axes[k].t_max))
-        far = max(ends, key=lambda e: float(np.linalg.norm(e - hub)))
-        if root is None or not np.allclose(root, far):
-            out.append(k)
-    return out
+    return [k for k in keep if not _wide_end_away(blades.instances[k], axes[k], hub, decisive=True)]
 
 
 def _longest_if_clearly(keep: list[int], axes: list[Axis], n: int) -> list[int]:
