@@ -349,7 +349,9 @@ def main(argv: list[str] | None = None) -> dict:
 
     weights = resolve_weights(a.model)
     model = load_model(weights, "cpu")
-    result: dict = {"model": str(weights.relative_to(ROOT) if weights.is_relative_to(ROOT) else weights)}
+    result: dict = {"model": str(weights.relative_to(ROOT) if weights.is_relative_to(ROOT) else weights),
+                    # the network's working size (shorter side, longer side at most)
+                    "working_size": [int(model.transform.min_size[0]), int(model.transform.max_size)]}
     log(f"speed ({a.speed_runs} runs each)")
     result["speed"] = speed(model, a.speed_runs, not a.no_stock)
     real = Path(a.real)

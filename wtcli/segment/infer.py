@@ -1,7 +1,7 @@
 """Run the segmenter on one image: BGR uint8 [H, W, 3] in, ``wtcli.masks.Instances`` out.
 
 Large photos (a 5472x3648 drone frame) are first downscaled so their longer side is at most
-``max_size`` (the network itself works at 480 px high, see ``wtcli.segment.model``); each
+``max_size`` (the network itself works at 576 px high, see ``wtcli.segment.model``); each
 predicted M x M box mask is then pasted straight into the ORIGINAL image size (``paste_mask``)
 and thresholded at 0.5, so masks, boxes and the background-removed image line up with the
 photo. Masks are pasted one instance at a time, into their box only.
@@ -197,7 +197,7 @@ def second_look(model: torch.nn.Module, image_bgr: np.ndarray, inst: Instances,
                 score_threshold: float, max_size: int | None = DEFAULT_MAX_SIZE) -> Instances:
     """Segment each small turbine again on a crop around it, and use those instances instead.
 
-    The network works at 480 px high: a distant turbine's blades are then 1-3 px wide and come
+    The network works at 576 px high: a distant turbine's blades are then 1-3 px wide and come
     out too thin, or not at all. Cropped with its surroundings (ZOOM_PAD of its size each side,
     the frame's aspect), it fills the network's view as in training (figures: docs/segment.md).
     The crop's detections that meet the turbine's box replace the first pass's of it, except
