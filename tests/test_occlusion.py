@@ -130,3 +130,27 @@ def test_coverage_needs_samples_that_know_their_turbine():
     with pytest.raises(ValueError, match="occlusion"):
         measure_coverage(bare, CAM, np.zeros((1, 3)), np.eye(3)[None], 1.5)
     assert s[s.blade == 0].turbine is t  # selecting samples keeps the turbine
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_pair_search_finds_every_pair_a_full_search_finds(seed):
+    """measure_coverage's cubes-and-cone cull (coverage._near_pairs) drops no (sample, photo) pair
+    that the per-pair tests pass: against every pair tested, for cameras of any field of view
+    near the surface, aimed anywhere (at it, past it, away)."""
+    from wtcli.geometry.coverage import _near_pairs, imaged
+
+    rng = np.random.default_rng(seed)
+    t = make_turbine(az=float(rng.uniform(0, 120)), yaw=float(rng.uniform(0, 360)))
+    s = t.surface_samples(1.0)
+    cam = Camera(int(rng.integers(800, 5456)), int(rng.integers(600, 3632)), float(rng.uniform(8, 35)), 23.2)
+    max_dist = float(rng.uniform(3, 12))
+    anchors = s.points[rng.integers(0, len(s), 300)]
+    pos = anchors + rng.normal(0, max_dist, (300, 3))
+    R = np.stack([look_at_rotation(p, a + rng.normal(0, 0.6 * max_dist, 3))
+                  for p, a in zip(pos, anchors)])
+    got = _near_pairs(s.points, s.normals, pos, R, cam, max_dist, 60.0, 0.02)
+    rel = s.points[None, :, :] - pos[:, None, :]
+    ok = imaged(rel, np.broadcast_to(s.normals, rel.shape), R[:, None], cam, max_dist, 60.0, 0.02)
+    p, i = np.nonzero(ok)
+    assert len(p) > 100  # the cases do see the surface
+    assert sorted(zip(got[0].tolist(), got[1].tolist())) == sorted(zip(i.tolist(), p.tolist()))
