@@ -32,6 +32,7 @@ def test_tiny_run_then_resume(tmp_path):
     assert {"last.ckpt", "model.pt", "metrics.json"} <= {p.name for p in run.iterdir()}
     m = json.loads((run / "metrics.json").read_text())
     assert m["schema"] == "wtinspect.train_metrics" and "blade_mask_iou" in m["evaluation"]
+    assert m["train_sizes_used"] == [72]  # the default sizes exceed these tiny renders: their own
     load_weights(build_model(), run / "model.pt")
     s2 = train(_tiny(tmp_path, iterations=3, resume=True, eval_count=0), progress=seen.append)
     assert s2["iterations"] == 3 and seen[-1]["iteration"] == 3
@@ -127,6 +128,15 @@ def test_synthetic_scenes_follow_the_seed(tmp_path, seed, monkeypatch):
 def test_cli_train_sizes_not_numbers_exit_3(cli, tmp_path):
     res = cli("train", "--sizes", "384,big", "--out", tmp_path / "r")
     assert res.exit_code == ExitCode.INPUT and "--sizes" in res.output
+
+
+def test_cli_train_sizes_above_the_renders_exit_4(cli, tmp_path):
+    """A size the renders cannot give is refused up front (it used to be dropped silently:
+    session 13's run asked for 448-576 on 640 x 480 renders and trained at 448 and 480)."""
+    res = cli("train", "--sizes", "448,576", "--out", tmp_path / "r")
+    assert res.exit_code == ExitCode.CONFIG
+    assert "576" in res.output and "--width 768 --height 576" in res.output
+    assert not (tmp_path / "r").exists()  # refused before anything was written
 
 
 def test_progress_in_a_log_is_a_line_per_checkpoint(capsys):

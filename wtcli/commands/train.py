@@ -39,7 +39,8 @@ def train(
                                                "shared CPU; raise it on an idle many-core one)."),
     sizes: Optional[str] = typer.Option(None, "--sizes",
                                         help="Shorter sides to train at, e.g. 384,416,448,480 "
-                                             "(default 320,352,384,416; inference uses 480)."),
+                                             "(default 320,352,384,416; inference uses 576); "
+                                             "on renders, at most --height/--width."),
     no_augment: bool = typer.Option(False, "--no-augment", help="Train on the images as they are."),
     stops: float = typer.Option(0.3, "--stops", min=0.0, max=1.0,
                                 help="Share of synthetic renders whose rotor stands where crews "
@@ -52,7 +53,7 @@ def train(
     from rich.table import Table
 
     from wtcli.console import err_console
-    from wtcli.errors import InputError
+    from wtcli.errors import ConfigError, InputError
     from wtcli.jsonio import document, dumps
     from wtcli.segment.model import TRAIN_MIN_SIZES
     from wtcli.segment.train import TRAIN_SCHEMA, TrainConfig
@@ -65,6 +66,15 @@ def train(
         except ValueError:
             raise InputError(f"--sizes {sizes!r}: expected whole pixel sizes separated by commas, "
                              "e.g. 384,416,448,480") from None
+        # Renders are never blown up (a run would silently train at fewer sizes than asked):
+        # render larger instead.
+        short = min(width, height)
+        big = [v for v in train_sizes if v > short]
+        if data is None and big:
+            raise ConfigError(f"--sizes {sizes}: {','.join(map(str, big))} above the renders' shorter "
+                             f"side ({width}x{height}); renders are not enlarged, so render larger "
+                             f"(e.g. --width {round(max(big) * width / short)} --height "
+                             f"{round(max(big) * height / short)}) or leave those sizes out")
     if data is not None and not data.exists():
         raise InputError(f"{data}: no such dataset (a COCO instances JSON or a folder with one)")
     cfg = TrainConfig(out=str(out), data=str(data) if data else None, iterations=iterations,

@@ -255,7 +255,7 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
     summary = {
         "arch": ARCH, "iterations": it, "stopped_by": stopped, "train_seconds": elapsed,
         "device": str(device), "final_loss": float(np.mean([h["loss"] for h in recent])) if recent else None,
-        "config": _cfg_dict(cfg), "evaluation": metrics,
+        "config": _cfg_dict(cfg), "train_sizes_used": list(sizes), "evaluation": metrics,
         "weights": str(out / "model.pt"), "checkpoint": str(ckpt_path),
     }
     write_json(out / "metrics.json", document(TRAIN_SCHEMA, 1, summary))
