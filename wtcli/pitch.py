@@ -576,7 +576,12 @@ def measure_pitch(contours: ContourSet, expected_blades: int | None = 3,
     if len(keep) > trim_to:
         keep = _longest_if_clearly(keep, all_axes, trim_to)
     if len(keep) > trim_to and candidate is not None:
-        keep = _without_wide_tips(keep, all_blades, all_axes, candidate)
+        fewer = _without_wide_tips(keep, all_blades, all_axes, candidate)
+        # Only when that leaves the rotor's count: the tower read as a blade. Blades that hardly
+        # taper (or thin ones, a few pixels wide) can look wider at the tip by pixel noise alone,
+        # and dropping them would lose real blades (all of them, even).
+        if len(fewer) == trim_to:
+            keep = fewer
     blades = all_blades[keep]
     others = tuple(all_blades.instances[i].source_index for i in range(len(all_blades))
                    if i not in keep)
