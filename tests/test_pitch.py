@@ -216,6 +216,20 @@ def test_a_stub_cut_by_the_frame_follows_the_hub():
     assert all(b.theta_method == "principal_axis" for b in res.blades if b is not stub)
 
 
+@pytest.mark.parametrize("gap", [0, 1, 2])
+def test_a_stub_just_short_of_the_frame_is_still_cut_by_it(gap):
+    # The upper blade's stub, narrower at the hub than at the frame (the nacelle's mask took
+    # its root's edges) and stopping ``gap`` px short of the edge as masks often do, is still
+    # this rotor's blade, not a far turbine's blade pointing at the hub (dev render 7 000 092).
+    h = w = 300
+    inst = rotor(h, w, [80, 200, 320], 14, hub=(150, 40), length=200, start=8)
+    inst.masks[0] = fill([(149, 32), (153, 32), (168, 0), (146, 0)], h, w)
+    inst.masks[0][:gap] = False
+    res = pitch_from_instances(inst, expected_blades=None)
+    assert sorted(b.source_index for b in res.blades) == [0, 1, 2]
+    assert err(next(b for b in res.blades if b.source_index == 0).phi_deg, 80, 360) < 12
+
+
 # ---- rendered turbines (the one geometry) -----------------------------------------------------------
 @pytest.mark.parametrize("azimuth, yaw, side", [(0, 0, 0), (33, 120, 0), (90, 250, 0), (61, 10, 15),
                                                  (178, 300, -12)])

@@ -284,9 +284,11 @@ def _supports(ax: Axis, length: float, width: float, c: np.ndarray) -> bool:
     return near_low or near_high
 
 
-def _touches_border(inst: InstanceContours, image_size: tuple[int, int]) -> bool:
+def _touches_border(inst: InstanceContours, image_size: tuple[int, int], margin: int = 2) -> bool:
+    """Cut by the frame: a mask seldom reaches the very edge pixel of what the frame cut."""
     x0, y0, x1, y1 = inst.bbox
-    return x0 <= 0 or y0 <= 0 or x1 >= image_size[1] or y1 >= image_size[0]
+    return (x0 <= margin or y0 <= margin or x1 >= image_size[1] - margin
+            or y1 >= image_size[0] - margin)
 
 
 def _wide_end_away(inst: InstanceContours, ax: Axis, hub: np.ndarray, decisive: bool = False) -> bool:
