@@ -46,6 +46,9 @@ def train(
                                 help="Share of synthetic renders whose rotor stands where crews "
                                      "stop it for inspection: a Y or an inverted Y (a blade in "
                                      "front of the tower)."),
+    precision: str = typer.Option("auto", "--precision",
+                                  help="auto | fp32 | bf16. auto: bfloat16 autocast on a CPU "
+                                       "that does bf16 natively (faster steps), else fp32."),
     resume: bool = typer.Option(False, "--resume", help="Continue from OUT/last.ckpt."),
     json_out: bool = typer.Option(False, "--json", help="Print the run summary JSON on stdout."),
 ) -> None:
@@ -82,7 +85,8 @@ def train(
                       width=width, height=height, seed=seed, init=str(init) if init else None,
                       checkpoint_every=checkpoint_every, eval_count=eval_count,
                       val=str(val) if val else None, device=device, workers=workers, threads=threads,
-                      augment=not no_augment, stops=stops, resume=resume, train_sizes=train_sizes)
+                      augment=not no_augment, stops=stops, resume=resume, train_sizes=train_sizes,
+                      precision=precision)
     report = _Report(iterations, max_minutes, checkpoint_every)
     try:
         summary = run_training(cfg, progress=report.step)
@@ -98,7 +102,7 @@ def train(
             table.add_row(label, "-" if iou is None else f"{iou:.3f}", "-" if ap is None else f"{ap:.3f}")
         err_console.print(table)
     err_console.print(f"{summary['iterations']} iterations in {summary['train_seconds']:.0f} s on "
-                      f"{summary['device']}; weights -> {summary['weights']}, resume from "
+                      f"{summary['device']} ({summary['precision']}); weights -> {summary['weights']}, resume from "
                       f"{summary['checkpoint']}")
     if json_out:
         typer.echo(dumps(document(TRAIN_SCHEMA, 1, summary)))
