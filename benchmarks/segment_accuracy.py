@@ -20,7 +20,10 @@
 2. Speed: one 1024 x 683 render, images/s of our model (``predict``, as ``segment`` runs it)
    and of torchvision's stock ``maskrcnn_resnet50_fpn(weights=None, weights_backbone=None)`` on
    the same input tensor, in this one process, same thread count; their ratio. (Untrained stock
-   weights: its timing includes its usual 100 detections per image.)
+   weights: its timing includes its usual 100 detections per image.) Our model runs in the
+   precision ``--precision`` gives (auto: the backbone in bfloat16 on a CPU that does it
+   natively, as ``segment`` does); the stock one in float32, as torchvision ships it; when ours
+   runs in bf16, its float32 speed and ratio are reported beside.
 3. Real photos, when ``--real`` (default ../shared/real-photos beside the repo) exists: blade and tower IoU
    against its semantic masks (0 background, 1 blade, 2 tower incl. nacelle/hub; our tower
    prediction = tower ∪ nacelle), and the blade count on the photos the manifest tags as front
@@ -196,7 +199,7 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
     return out
 
 
-def speed(model, runs: int, with_stock: bool) -> dict:
+def speed(model, runs: int, with_stock: bool, fp32_model=None) -> dict:
     from wtcli.synth.render import render_sample
 
     img = render_sample(HELDOUT_SEED_BASE + 999_999, width=1024, height=683, view="front").image
@@ -218,7 +221,10 @@ def speed(model, runs: int, with_stock: bool) -> dict:
                                                     CANDIDATE_FLOOR))
               for name, im in (("this render", img), ("a distant render", far))}
     out = {"input": "1024x683 BGR render", "runs": runs, "threads": torch.get_num_threads(),
+           "precision": getattr(model, "precision", "fp32"),
            "ours_images_per_s": ours, "ours_with_zoom_images_per_s": zoomed}
+    if fp32_model is not None:  # the same network in float32, for the record
+        out["ours_fp32_images_per_s"] = clock(lambda: predict(fp32_model, img, score_threshold=0.5))
     if with_stock:
         from torchvision.models.detection import maskrcnn_resnet50_fpn
 
@@ -232,6 +238,8 @@ def speed(model, runs: int, with_stock: bool) -> dict:
 
         out["stock_r50_fpn_images_per_s"] = clock(run_stock)
         out["speedup_vs_stock"] = ours / out["stock_r50_fpn_images_per_s"]
+        if "ours_fp32_images_per_s" in out:
+            out["speedup_vs_stock_fp32"] = out["ours_fp32_images_per_s"] / out["stock_r50_fpn_images_per_s"]
     return out
 
 
@@ -337,6 +345,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--speed-runs", type=int, default=5)
     ap.add_argument("--no-stock", action="store_true", help="skip the stock R50-FPN timing")
     ap.add_argument("--threads", type=int, default=None)
+    ap.add_argument("--precision", default="auto", help="auto | fp32 | bf16 (segment's --precision)")
     ap.add_argument("--max-minutes", type=float, default=None,
                     help="stop the synthetic part after this long (the N reached is reported)")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "segment_accuracy.json"))
@@ -348,12 +357,14 @@ def main(argv: list[str] | None = None) -> dict:
         print(msg, file=sys.stderr, flush=True)
 
     weights = resolve_weights(a.model)
-    model = load_model(weights, "cpu")
+    model = load_model(weights, "cpu", a.precision)
     result: dict = {"model": str(weights.relative_to(ROOT) if weights.is_relative_to(ROOT) else weights),
                     # the network's working size (shorter side, longer side at most)
                     "working_size": [int(model.transform.min_size[0]), int(model.transform.max_size)]}
     log(f"speed ({a.speed_runs} runs each)")
-    result["speed"] = speed(model, a.speed_runs, not a.no_stock)
+    result["precision"] = model.precision
+    result["speed"] = speed(model, a.speed_runs, not a.no_stock,
+                            load_model(weights, "cpu", "fp32") if model.precision != "fp32" else None)
     real = Path(a.real)
     if real.is_dir():
         result["real"] = real_photos(model, real, log)

@@ -20,7 +20,8 @@ from wtcli.errors import InputError
 from wtcli.masks import LABELS, Instances
 from wtcli.pitch import CANDIDATE_FLOOR
 from wtcli.segment.data import image_tensor
-from wtcli.segment.model import build_model, load_weights, pick_device, resolve_weights, set_infer_size
+from wtcli.segment.model import (backbone_in_bf16, build_model, load_weights, pick_device,
+                                 resolve_precision, resolve_weights, set_infer_size)
 
 DEFAULT_MAX_SIZE = 1600
 DEFAULT_SCORE_THRESHOLD = 0.5
@@ -36,13 +37,17 @@ _CACHE: dict[tuple, torch.nn.Module] = {}
 _LOCK = threading.Lock()
 
 
-def load_model(weights: str | Path | None = None, device: str | torch.device | None = None):
+def load_model(weights: str | Path | None = None, device: str | torch.device | None = None,
+               precision: str | None = None):
     """Build the network and load weights (default: the shipped ``models/`` file); cached per
-    (path, device), so a batch or a chained command loads it once."""
+    (path, device, precision), so a batch or a chained command loads it once. ``precision``:
+    auto (None) | fp32 | bf16 (``model.resolve_precision``); the model's ``precision`` says
+    which it runs in."""
     dev = device if isinstance(device, torch.device) else pick_device(device)
+    prec = resolve_precision(precision, dev)
     path = resolve_weights(weights)
     stamp = path.stat().st_mtime_ns if path.is_file() else None
-    key = (str(path.resolve()) if path.exists() else str(path), str(dev), stamp)
+    key = (str(path.resolve()) if path.exists() else str(path), str(dev), stamp, prec)
     with _LOCK:
         if key not in _CACHE:
             model = build_model()
@@ -52,6 +57,8 @@ def load_model(weights: str | Path | None = None, device: str | torch.device | N
             model.mask_offset_px = float(meta.get("mask_offset_px", 0.0))
             set_infer_size(model)
             model.eval().to(dev)
+            backbone_in_bf16(model, prec == "bf16")
+            model.precision = prec
             _CACHE[key] = model
         return _CACHE[key]
 

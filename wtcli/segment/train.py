@@ -29,8 +29,9 @@ from wtcli.errors import ConfigError, InputError, ModelError
 from wtcli.jsonio import atomic_write_bytes, document, write_json
 from wtcli.segment import data as D
 from wtcli.segment.infer import MASK_OFFSET_PX
-from wtcli.segment.model import (ARCH, TRAIN_MIN_SIZES, build_model, load_weights, pick_device,
-                                 save_weights, set_infer_size, set_train_sizes)
+from wtcli.segment.model import (ARCH, PRECISIONS, TRAIN_MIN_SIZES, backbone_in_bf16, build_model,
+                                 load_weights, pick_device, resolve_precision, save_weights,
+                                 set_infer_size, set_train_sizes)
 
 TRAIN_SCHEMA = "wtinspect.train_metrics"
 CKPT_NAME = "last.ckpt"
@@ -61,7 +62,7 @@ class TrainConfig:
     stops: float = 0.3  # share of synthetic scenes whose rotor stands in a Y / inverted Y
     resume: bool = False
     train_sizes: tuple[int, ...] = field(default_factory=lambda: TRAIN_MIN_SIZES)
-    precision: str = "auto"  # auto | fp32 | bf16: see train_precision
+    precision: str = "auto"  # auto | fp32 | bf16: see model.resolve_precision
 
     def check(self) -> None:
         def need(ok: bool, what: str) -> None:
@@ -83,25 +84,6 @@ class TrainConfig:
              f"expected --sizes in 64..2048 px, got {','.join(map(str, self.train_sizes)) or 'none'}")
 
 
-PRECISIONS = ("auto", "fp32", "bf16")
-
-
-def train_precision(asked: str, device: torch.device) -> str:
-    """The precision a run computes in: "bf16" (the trunk and FPN under autocast, convolutions
-    in bfloat16; heads, weights, optimizer and losses in float32) or "fp32". "auto" takes bf16
-    on a CPU that does bfloat16 natively (AVX-512 BF16 or AMX: a training step 1.5x faster on
-    this project's 2-core AMD EPYC) and fp32 elsewhere (emulated bf16 is slower; GPUs keep the
-    precision the shipped runs were checked with)."""
-    if asked != "auto":
-        return asked
-    if device.type == "cpu" and torch.backends.mkldnn.is_available():
-        try:
-            return "bf16" if torch.ops.mkldnn._is_mkldnn_bf16_supported() else "fp32"
-        except (AttributeError, RuntimeError):
-            return "fp32"
-    return "fp32"
-
-
 SYNTH_STRETCH = 100_000  # synthetic scenes reserved per seed (runs so far saw < 20 000)
 
 
@@ -109,20 +91,6 @@ def lr_factor(progress: float, it: int, warmup: int) -> float:
     warm = min(1.0, (it + 1) / max(1, warmup))
     cos = 0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * min(1.0, progress)))
     return warm * cos
-
-
-def _backbone_in_bf16(model, device: torch.device) -> None:
-    """Run the trunk and FPN (most of a step's arithmetic) under bfloat16 autocast and hand
-    float32 features to the heads: box coordinates in bfloat16 (8-bit mantissa, a few pixels
-    at 500 px) made degenerate proposals and a NaN box loss on the first step tried."""
-    plain = model.backbone.forward
-
-    def forward(x):
-        with torch.autocast(device.type, dtype=torch.bfloat16):
-            feats = plain(x)
-        return type(feats)((k, v.float()) for k, v in feats.items())
-
-    model.backbone.forward = forward
 
 
 def _seed_all(seed: int) -> None:
@@ -235,7 +203,7 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
     if not cfg.data:  # never blow small renders up: train at most at their own size
         sizes = tuple(s for s in sizes if s <= min(cfg.width, cfg.height)) or (min(cfg.width, cfg.height),)
     set_train_sizes(model, sizes, max(max(sizes) * 4 // 3, max(cfg.width, cfg.height)))
-    precision = train_precision(cfg.precision, device)
+    precision = resolve_precision(cfg.precision, device)
     params = [p for p in model.parameters() if p.requires_grad]
     opt = torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay, foreach=True)
     if state is not None and "optimizer" in state:
@@ -247,7 +215,7 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
     model.train()
     stopped = "iterations"
     if precision == "bf16":
-        _backbone_in_bf16(model, device)
+        backbone_in_bf16(model)
     if it < cfg.iterations:
         for images, targets in _batches(ds, cfg, start_it):
             elapsed = elapsed0 + time.monotonic() - t0
@@ -283,7 +251,7 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
                 stopped = "max_minutes"
                 break
     elapsed = elapsed0 + time.monotonic() - t0
-    model.backbone.__dict__.pop("forward", None)  # the plain float32 backbone again
+    backbone_in_bf16(model, False)  # the plain float32 backbone for the end-of-run check
     _save_ckpt(ckpt_path, model, opt, it, cfg, elapsed, history)
     model.eval()
     set_infer_size(model)
