@@ -47,8 +47,8 @@ def train(
                                      "stop it for inspection: a Y or an inverted Y (a blade in "
                                      "front of the tower)."),
     precision: str = typer.Option("auto", "--precision",
-                                  help="auto | fp32 | bf16. auto: bfloat16 autocast on a CPU "
-                                       "that does bf16 natively (faster steps), else fp32."),
+                                  help="auto | fp32 | bf16. auto: the backbone in bfloat16 on a "
+                                       "CPU that does bf16 natively (faster steps), else fp32."),
     resume: bool = typer.Option(False, "--resume", help="Continue from OUT/last.ckpt."),
     json_out: bool = typer.Option(False, "--json", help="Print the run summary JSON on stdout."),
 ) -> None:
@@ -102,8 +102,8 @@ def train(
             table.add_row(label, "-" if iou is None else f"{iou:.3f}", "-" if ap is None else f"{ap:.3f}")
         err_console.print(table)
     err_console.print(f"{summary['iterations']} iterations in {summary['train_seconds']:.0f} s on "
-                      f"{summary['device']} ({summary['precision']}); weights -> {summary['weights']}, resume from "
-                      f"{summary['checkpoint']}")
+                      f"{summary['device']} ({summary['precision']}); weights -> {summary['weights']}, "
+                      f"resume from {summary['checkpoint']}")
     if json_out:
         typer.echo(dumps(document(TRAIN_SCHEMA, 1, summary)))
 

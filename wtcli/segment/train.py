@@ -263,7 +263,8 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
     recent = history[-50:]
     summary = {
         "arch": ARCH, "iterations": it, "stopped_by": stopped, "train_seconds": elapsed,
-        "device": str(device), "precision": precision, "final_loss": float(np.mean([h["loss"] for h in recent])) if recent else None,
+        "device": str(device), "precision": precision,
+        "final_loss": float(np.mean([h["loss"] for h in recent])) if recent else None,
         "config": _cfg_dict(cfg), "train_sizes_used": list(sizes), "evaluation": metrics,
         "weights": str(out / "model.pt"), "checkpoint": str(ckpt_path),
     }
