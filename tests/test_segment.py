@@ -523,3 +523,22 @@ def test_bf16_backbone_segments_like_fp32():
     for label in ("blade", "tower", "nacelle"):
         assert mask_iou(pa.of(label).union(), pb.of(label).union()) > 0.97
     assert mask_iou(pa.of("blade").union(), s.instances.of("blade").union()) > 0.6
+
+
+def test_bf16_covers_the_backbone_only():
+    # Convolutions of the trunk compute in bfloat16; the heads get float32 features (bf16 box
+    # coordinates made degenerate proposals); switching it off restores plain float32.
+    from wtcli.segment.model import backbone_in_bf16
+
+    m = build_model().eval()
+    seen = []
+    m.backbone.body.conv1.register_forward_hook(lambda mod, i, o: seen.append(o.dtype))
+    x = torch.rand(1, 3, 64, 96)
+    backbone_in_bf16(m)
+    with torch.inference_mode():
+        feats = m.backbone(x)
+    assert seen == [torch.bfloat16] and all(v.dtype == torch.float32 for v in feats.values())
+    backbone_in_bf16(m, False)
+    with torch.inference_mode():
+        feats = m.backbone(x)
+    assert seen[-1] == torch.float32 and all(v.dtype == torch.float32 for v in feats.values())
