@@ -306,6 +306,22 @@ def test_paste_mask_puts_a_thin_blade_back_where_it_was(angle):
     assert mask_iou(shifted, truth) < mask_iou(ours, truth) - 0.1
 
 
+def test_each_class_mask_is_cut_at_its_own_threshold(monkeypatch):
+    """A blade's soft mask is cut at MASK_THRESHOLD["blade"] (0.45), the tower's at 0.5: a
+    uniform 0.47 in both boxes gives a full blade and no tower."""
+    assert infer.MASK_THRESHOLD["blade"] < 0.47 < infer.MASK_THRESHOLD["tower"]
+    det = {"scores": torch.tensor([0.9, 0.8]), "labels": torch.tensor([1, 2]),
+           "boxes": torch.tensor([[10.0, 10.0, 40.0, 20.0], [50.0, 10.0, 60.0, 50.0]]),
+           "masks": torch.full((2, 1, 28, 28), 0.47)}
+    monkeypatch.setattr(infer, "_detect", lambda model, x: (det, (64, 96)))
+    inst = infer.predict(build_model(), np.zeros((64, 96, 3), np.uint8))
+    assert list(inst.labels) == ["blade", "tower"]
+    assert inst.masks[0].sum() >= 0.9 * 30 * 10 and inst.masks[1].sum() == 0
+    out = np.zeros((64, 96), bool)
+    infer.paste_mask(out, np.full((28, 28), 0.47, np.float32), [10, 10, 40, 20], 1.0, 1.0)
+    assert not out.any()  # the paste's own default stays 0.5
+
+
 def test_paste_mask_scales_back_to_the_full_photo():
     full = _bar(960, 1280, 90, 12, 600)
     work = cv2.resize(full.astype(np.float32), (640, 480), interpolation=cv2.INTER_AREA) >= 0.5
