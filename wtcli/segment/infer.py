@@ -29,7 +29,7 @@ DEFAULT_SCORE_THRESHOLD = 0.5
 MASK_OFFSET_PX = 0.5  # see paste_mask; weights trained with area-resized masks
 # Where each class's soft mask is cut. Blades at 0.45: on 200 development renders (seeds
 # 7 000 000 +, run 13) blade IoU 0.742 against 0.735 at 0.5 (0.737 at 0.4, 0.715 at 0.55): the
-# soft edge of a blade a few pixels wide lies a little outside 0.5. Tower and nacelle peak at 0.5.
+# soft edge of a blade a few pixels wide comes out a little below 0.5. Tower and nacelle peak at 0.5.
 MASK_THRESHOLD = {"blade": 0.45, "tower": 0.5, "nacelle": 0.5}
 DUPLICATE_INSIDE = 0.3  # a blade this much inside a better-scored blade is the same blade
 # Second look (``second_look``): a turbine whose detections span less than this share of the
@@ -162,8 +162,8 @@ def _detect(model, x: torch.Tensor) -> tuple[dict, tuple[int, int]]:
 
 def paste_mask(out: np.ndarray, soft: np.ndarray, box, sx: float, sy: float,
                offset: float = MASK_OFFSET_PX, threshold: float = 0.5) -> None:
-    """Threshold the M x M mask ``soft`` of ``box`` (working-size pixels) at ``threshold`` into ``out``
-    (bool, original image size; ``sx, sy`` = original / working size).
+    """Threshold the M x M mask ``soft`` of ``box`` (working-size pixels) at ``threshold``
+    into ``out`` (bool, original image size; ``sx, sy`` = original / working size).
 
     Cell i of a box [x1, x2) is centred at x1 + offset + (i + 0.5) (x2 - x1) / M (pixel edges
     at integers). Training targets come from torchvision's ``project_masks_on_boxes``
