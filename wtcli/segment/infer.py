@@ -29,7 +29,8 @@ DEFAULT_SCORE_THRESHOLD = 0.5
 MASK_OFFSET_PX = 0.5  # see paste_mask; weights trained with area-resized masks
 # Where each class's soft mask is cut. Blades at 0.45: on 200 development renders (seeds
 # 7 000 000 +, run 13) blade IoU 0.742 against 0.735 at 0.5 (0.737 at 0.4, 0.715 at 0.55): the
-# soft edge of a blade a few pixels wide comes out a little below 0.5. Tower and nacelle peak at 0.5.
+# soft edge of a blade a few pixels wide comes out a little below 0.5. Tower and nacelle peak
+# at 0.5.
 MASK_THRESHOLD = {"blade": 0.45, "tower": 0.5, "nacelle": 0.5}
 DUPLICATE_INSIDE = 0.3  # a blade this much inside a better-scored blade is the same blade
 # Second look (``second_look``): a turbine whose detections span less than this share of the
