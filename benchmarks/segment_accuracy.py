@@ -31,6 +31,9 @@
    them or copy them into the repo.
 
 Results are printed and written as JSON (``--out``, default benchmarks/results/segment_accuracy.json).
+
+``--dev`` runs part 1 alone on the development seeds (``render_sample(7_000_000 + i, ...)``, the
+same mix): where errors are looked into and settings chosen, so the held-out set stays unseen.
 """
 
 from __future__ import annotations
@@ -51,7 +54,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from wtcli.errors import WtError  # noqa: E402
 from wtcli.jsonio import document, write_json  # noqa: E402
 from wtcli.masks import Instances  # noqa: E402
-from wtcli.segment.data import HELDOUT_SEED_BASE, image_tensor  # noqa: E402
+from wtcli.segment.data import DEV_SEED_BASE, HELDOUT_SEED_BASE, image_tensor  # noqa: E402
 from wtcli.segment.evaluate import Evaluator, mask_iou  # noqa: E402
 from wtcli.pitch import CANDIDATE_FLOOR, DEFAULT_SCORE_THRESHOLD  # noqa: E402
 from wtcli.segment.infer import load_model, predict, second_look  # noqa: E402
@@ -105,7 +108,8 @@ def completion_input(pred: Instances) -> Instances:
                 | ((pred.labels == "blade") & (pred.scores >= CANDIDATE_FLOOR))]
 
 
-def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | None = None) -> dict:
+def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | None = None,
+              seed_base: int = HELDOUT_SEED_BASE) -> dict:
     from wtcli.synth.render import render_sample
 
     ev = Evaluator(0.5)
@@ -115,6 +119,7 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
     front_n = front_right = front_right0 = gt_right = 0
     by_fill = {"distant": [0, 0, 0], "working": [0, 0, 0]}  # [front views, right, right w/o]
     errs, errs0, adm_errs, gt_errs = [], [], [], []
+    wrong: list[dict] = []  # front views read wrong (second look)
     t0 = time.perf_counter()
     done = 0
     for i in range(n):
@@ -122,7 +127,7 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
             log(f"  time limit: stopped after {i} images")
             break
         done = i + 1
-        s = render_sample(HELDOUT_SEED_BASE + i, width=width, height=height,
+        s = render_sample(seed_base + i, width=width, height=height,
                           view="front" if i % 2 == 0 else None)
         views[s.truth["view"]] = views.get(s.truth["view"], 0) + 1
         g = (s.truth.get("environment") or {}).get("ground", "?")
@@ -147,6 +152,9 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
             errs0 += e0
             kz, ez, _ = pitch_errors(completion_input(zpred), s.truth, completion=True)
             zoom["right"] += kz == s.truth["blades_visible"]
+            if kz != s.truth["blades_visible"]:
+                wrong.append({"seed": seed_base + i, "blades_visible": s.truth["blades_visible"],
+                              "found": kz, "found_first_pass": k, "fill": round(s.truth["fill"], 3)})
             zoom["errs"] += ez
             zb = zoom["by_fill"]["distant" if s.truth["fill"] < FILL_WORKING else "working"]
             zb[0] += 1
@@ -167,11 +175,12 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
         "theta_error_median_deg": float(np.median(zoom["errs"])) if zoom["errs"] else None,
         "theta_error_p95_deg": float(np.percentile(zoom["errs"], 95)) if zoom["errs"] else None,
         "theta_blades_measured": len(zoom["errs"]),
+        "front_wrong_blade_count": wrong,
     })
     out.update({
         "zoom": zs,
         "n": done, "n_asked": n, "width": width, "height": height,
-        "seeds": [HELDOUT_SEED_BASE, HELDOUT_SEED_BASE + done - 1],
+        "seeds": [seed_base, seed_base + done - 1],
         "views": views, "grounds": grounds,
         "front_views": front_n,
         "rotor_completion": {"score_threshold": DEFAULT_SCORE_THRESHOLD,
@@ -348,8 +357,15 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--precision", default="auto", help="auto | fp32 | bf16 (segment's --precision)")
     ap.add_argument("--max-minutes", type=float, default=None,
                     help="stop the synthetic part after this long (the N reached is reported)")
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "segment_accuracy.json"))
+    ap.add_argument("--dev", action="store_true",
+                    help="the synthetic part on the development seeds (7 000 000 + i) instead of the "
+                         "held-out ones, and no speed or real-photo part: for looking into errors "
+                         "and choosing settings without spending the held-out set (needs --out)")
+    ap.add_argument("--out", default=None)
     a = ap.parse_args(argv)
+    if a.dev and not a.out:
+        ap.error("--dev needs --out (the results file is the held-out benchmark's)")
+    a.out = a.out or str(ROOT / "benchmarks" / "results" / "segment_accuracy.json")
     if a.threads:
         torch.set_num_threads(a.threads)
 
@@ -361,19 +377,23 @@ def main(argv: list[str] | None = None) -> dict:
     result: dict = {"model": str(weights.relative_to(ROOT) if weights.is_relative_to(ROOT) else weights),
                     # the network's working size (shorter side, longer side at most)
                     "working_size": [int(model.transform.min_size[0]), int(model.transform.max_size)]}
-    log(f"speed ({a.speed_runs} runs each)")
     result["precision"] = model.precision
-    result["speed"] = speed(model, a.speed_runs, not a.no_stock,
-                            load_model(weights, "cpu", "fp32") if model.precision != "fp32" else None)
+    if not a.dev:
+        log(f"speed ({a.speed_runs} runs each)")
+        result["speed"] = speed(model, a.speed_runs, not a.no_stock,
+                                load_model(weights, "cpu", "fp32") if model.precision != "fp32" else None)
     real = Path(a.real)
-    if real.is_dir():
+    if a.dev:
+        result["real"] = None
+    elif real.is_dir():
         result["real"] = real_photos(model, real, log)
     else:
         result["real"] = None
         log(f"  {real}: not here, real-photo figures skipped")
     if a.n > 0:
-        log(f"held-out synthetic set: {a.n} images")
-        result["synthetic"] = synthetic(model, a.n, a.width, a.height, log, a.max_minutes)
+        log(f"{'development' if a.dev else 'held-out'} synthetic set: {a.n} images")
+        result["synthetic"] = synthetic(model, a.n, a.width, a.height, log, a.max_minutes,
+                                        DEV_SEED_BASE if a.dev else HELDOUT_SEED_BASE)
     write_json(a.out, document("wtinspect.benchmark.segment_accuracy", 1, result))
     import json
 

@@ -19,6 +19,7 @@ from wtcli.errors import InputError
 from wtcli.masks import LABELS, Instances, read_instances
 
 TRAIN_SEED_BASE = 1_000_000  # synthetic training scenes use seeds TRAIN_SEED_BASE + i
+DEV_SEED_BASE = 7_000_000  # development probes (choosing thresholds); never trained on
 HELDOUT_SEED_BASE = 9_000_000  # benchmarks only; never trained on
 MIN_INSTANCE_PIXELS = 24
 
