@@ -19,7 +19,8 @@
      masks is printed beside it, to separate segmentation error from pitch error.
 2. Speed: one 1024 x 683 render, images/s of our model (``predict``, as ``segment`` runs it)
    and of torchvision's stock ``maskrcnn_resnet50_fpn(weights=None, weights_backbone=None)`` on
-   the same input tensor, in this one process, same thread count; their ratio. (Untrained stock
+   the same input tensor, in this one process, same thread count; their ratio, with and without
+   the mirrored masks (``segment --no-flip``). (Untrained stock
    weights: its timing includes its usual 100 detections per image.) Our model runs in the
    precision ``--precision`` gives (auto: the backbone in bfloat16 on a CPU that does it
    natively, as ``segment`` does); the stock one in float32, as torchvision ships it; when ours
@@ -232,6 +233,8 @@ def speed(model, runs: int, with_stock: bool, fp32_model=None) -> dict:
     out = {"input": "1024x683 BGR render", "runs": runs, "threads": torch.get_num_threads(),
            "precision": getattr(model, "precision", "fp32"),
            "ours_images_per_s": ours, "ours_with_zoom_images_per_s": zoomed}
+    # Without the mirrored masks (segment --no-flip), for the record.
+    out["ours_no_flip_images_per_s"] = clock(lambda: predict(model, img, score_threshold=0.5, flip=False))
     if fp32_model is not None:  # the same network in float32, for the record
         out["ours_fp32_images_per_s"] = clock(lambda: predict(fp32_model, img, score_threshold=0.5))
     if with_stock:
@@ -247,6 +250,7 @@ def speed(model, runs: int, with_stock: bool, fp32_model=None) -> dict:
 
         out["stock_r50_fpn_images_per_s"] = clock(run_stock)
         out["speedup_vs_stock"] = ours / out["stock_r50_fpn_images_per_s"]
+        out["speedup_vs_stock_no_flip"] = out["ours_no_flip_images_per_s"] / out["stock_r50_fpn_images_per_s"]
         if "ours_fp32_images_per_s" in out:
             out["speedup_vs_stock_fp32"] = out["ours_fp32_images_per_s"] / out["stock_r50_fpn_images_per_s"]
     return out

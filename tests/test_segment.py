@@ -182,6 +182,20 @@ def test_segment_folder_writes_everything(cli, photo_folder, random_weights, tmp
     assert not list(out.rglob(".*"))  # no temporary files left behind
 
 
+def test_segment_no_flip_is_recorded_and_changes_only_masks(cli, photo_folder, random_weights, tmp_path):
+    runs = {}
+    for flag in ("--flip", "--no-flip"):
+        out = tmp_path / flag.strip("-")
+        res = cli("segment", photo_folder, "--out", out, "--model", random_weights, "--json",
+                  "--score-threshold", "0.0", flag)
+        assert res.exit_code == 0, res.stderr
+        assert json.loads(res.stdout)["settings"]["flip"] is (flag == "--flip")
+        runs[flag] = json.loads((out / "instances.json").read_text())["annotations"]
+    a, b = runs["--flip"], runs["--no-flip"]
+    assert len(a) == len(b) and [x["bbox"] for x in a] == [x["bbox"] for x in b]
+    assert [x["segmentation"] for x in a] != [x["segmentation"] for x in b]
+
+
 def test_segment_recursive(cli, photo_folder, random_weights, tmp_path):
     res = cli("segment", photo_folder, "-r", "--out", tmp_path / "seg", "--model", random_weights)
     assert res.exit_code == 0, res.stderr
@@ -313,7 +327,7 @@ def test_each_class_mask_is_cut_at_its_own_threshold(monkeypatch):
     det = {"scores": torch.tensor([0.9, 0.8]), "labels": torch.tensor([1, 2]),
            "boxes": torch.tensor([[10.0, 10.0, 40.0, 20.0], [50.0, 10.0, 60.0, 50.0]]),
            "masks": torch.full((2, 1, 28, 28), 0.47)}
-    monkeypatch.setattr(infer, "_detect", lambda model, x: (det, (64, 96)))
+    monkeypatch.setattr(infer, "_detect", lambda model, x, flip=False: (det, (64, 96)))
     inst = infer.predict(build_model(), np.zeros((64, 96, 3), np.uint8))
     assert list(inst.labels) == ["blade", "tower"]
     assert inst.masks[0].sum() >= 0.9 * 30 * 10 and inst.masks[1].sum() == 0
@@ -397,7 +411,7 @@ def test_segment_image_keeps_low_score_blades_as_completion_candidates(monkeypat
                       np.array([0.9, 0.3, 0.3, 0.1, 0.6]))
     asked = []
 
-    def fake_predict(model, image, score_threshold=0.5, max_size=None):
+    def fake_predict(model, image, score_threshold=0.5, max_size=None, flip=True):
         asked.append(score_threshold)
         return every[every.scores >= score_threshold]
 
@@ -468,7 +482,7 @@ def test_second_look_recrops_a_small_turbine_and_pastes_it_back(monkeypatch):
     inst = Instances(np.array(["blade", "tower", "tower"], object), first, np.array([0.9, 0.8, 0.95]))
     crops = []
 
-    def fake_predict(model, image, score_threshold=0.5, max_size=None):
+    def fake_predict(model, image, score_threshold=0.5, max_size=None, flip=True):
         h, w = image.shape[:2]
         crops.append((h, w))
         m = np.zeros((3, h, w), bool)
@@ -558,3 +572,32 @@ def test_bf16_covers_the_backbone_only():
     with torch.inference_mode():
         feats = m.backbone(x)
     assert seen[-1] == torch.float32 and all(v.dtype == torch.float32 for v in feats.values())
+
+
+def test_mirrored_boxes_pool_the_same_place():
+    """The mask head pools with RoIAlign (aligned=False): a box and its ``mirror_boxes`` box in
+    the mirrored map, the latter pooled and mirrored back, must see a thin line at the same
+    cell (without the one-pixel move they are a cell apart)."""
+    from torchvision.ops import roi_align
+
+    W = 64
+    feat = torch.zeros(1, 1, 40, W)
+    feat[..., 27] = 1.0  # a one-pixel line in column 27
+    box = torch.tensor([[14.0, 5.0, 42.0, 33.0]])  # 28 px wide: one pixel per cell
+    plain = roi_align(feat, [box], 28, 1.0, 2, aligned=False)[0, 0].mean(0)
+    moved = infer.mirror_boxes(box, W)
+    assert moved.tolist() == [[W - 42.0 - 1, 5.0, W - 14.0 - 1, 33.0]]
+    back = roi_align(feat.flip(-1), [moved], 28, 1.0, 2, aligned=False)[0, 0].mean(0).flip(0)
+    assert int(plain.argmax()) == int(back.argmax())
+    assert torch.allclose(plain, back, atol=1e-6)
+
+
+def test_flip_changes_the_masks_only(random_model):
+    """``flip`` averages each mask with the mirror image's; boxes, scores and labels are the
+    plain pass's."""
+    img = _image()
+    a = infer.predict(random_model, img, score_threshold=0.0, flip=False)
+    b = infer.predict(random_model, img, score_threshold=0.0, flip=True)
+    assert len(a) and list(a.labels) == list(b.labels)
+    assert np.allclose(a.scores, b.scores) and np.allclose(a.boxes, b.boxes)
+    assert a.masks.shape == b.masks.shape and (a.masks != b.masks).any()

@@ -23,6 +23,9 @@ def segment(
     zoom: bool = typer.Option(True, "--zoom/--no-zoom",
                               help="Segment each small (distant) turbine again on a crop around "
                                    "it: its blades come out fuller and its angles truer."),
+    flip: bool = typer.Option(True, "--flip/--no-flip",
+                              help="Average each mask with the mirrored photo's (truer thin "
+                                   "blades; --no-flip: about 1.7x faster)."),
     device: str = typer.Option("auto", "--device", help="auto (GPU if present) | cpu | cuda[:N]."),
     precision: str = typer.Option("auto", "--precision",
                                   help="auto | fp32 | bf16. auto: the backbone in bfloat16 on a "
@@ -51,13 +54,13 @@ def segment(
     net = load_model(weights, device, precision)
 
     def run(img):
-        inst = predict(net, img, score_threshold=score_threshold, max_size=max_size)
-        return second_look(net, img, inst, score_threshold, max_size) if zoom else inst
+        inst = predict(net, img, score_threshold=score_threshold, max_size=max_size, flip=flip)
+        return second_look(net, img, inst, score_threshold, max_size, flip) if zoom else inst
 
     with count_bar("segment", len(files)) as advance:
         results = segment_paths(path, out, run, recursive=recursive, resume=resume,
                                 on_progress=lambda res: advance(f"{res.rel} {res.status}"))
-    settings = {"score_threshold": score_threshold, "max_size": max_size, "zoom": zoom,
+    settings = {"score_threshold": score_threshold, "max_size": max_size, "zoom": zoom, "flip": flip,
                 "model": str(weights),
                 "device": str(next(net.parameters()).device), "precision": net.precision}
     report = write_batch_files(out, results, settings)

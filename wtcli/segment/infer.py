@@ -5,7 +5,8 @@ Large photos (a 5472x3648 drone frame) are first downscaled so their longer side
 predicted M x M box mask is then pasted straight into the ORIGINAL image size (``paste_mask``)
 and thresholded, so masks, boxes and the background-removed image line up with the
 photo. Masks are pasted one instance at a time, into their box only, and cut at
-``MASK_THRESHOLD`` of their class.
+``MASK_THRESHOLD`` of their class. With ``flip`` (the default) each soft mask is the mean of the
+network's mask for the photo and for its mirror image (``_mirrored_masks``).
 """
 
 from __future__ import annotations
@@ -74,8 +75,13 @@ def _device_of(model: torch.nn.Module) -> torch.device:
 
 
 def predict(model: torch.nn.Module, image_bgr: np.ndarray, score_threshold: float = DEFAULT_SCORE_THRESHOLD,
-            max_size: int | None = DEFAULT_MAX_SIZE, device=None) -> Instances:
-    """Instances (labels, masks at the image's size, scores, boxes xyxy) with score >= threshold."""
+            max_size: int | None = DEFAULT_MAX_SIZE, device=None, flip: bool = True) -> Instances:
+    """Instances (labels, masks at the image's size, scores, boxes xyxy) with score >= threshold.
+
+    ``flip``: average each mask with the mirror image's (the boxes and scores are the plain
+    pass's); about 1.7 x the time. On 300 development renders (run 14, second look) blade /
+    tower / nacelle IoU 0.757 / 0.855 / 0.768 -> 0.767 / 0.863 / 0.779: the two passes' pixel
+    jitter on thin blades partly cancels."""
     img = np.asarray(image_bgr)
     if img.ndim == 2:
         img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
@@ -96,7 +102,7 @@ def predict(model: torch.nn.Module, image_bgr: np.ndarray, score_threshold: floa
     dev = _device_of(model) if device is None else torch.device(device)
     model.eval()
     with torch.inference_mode():
-        det, (hw, ww) = _detect(model, image_tensor(img).to(dev))
+        det, (hw, ww) = _detect(model, image_tensor(img).to(dev), flip)
     scores = det["scores"].float().cpu().numpy()
     keep = scores >= score_threshold
     if not keep.any():
@@ -150,15 +156,43 @@ def drop_duplicate_blades(inst: Instances, inside: float = DUPLICATE_INSIDE) -> 
     return inst[np.setdiff1d(np.arange(len(inst)), drop)]
 
 
-def _detect(model, x: torch.Tensor) -> tuple[dict, tuple[int, int]]:
+def _detect(model, x: torch.Tensor, flip: bool = False) -> tuple[dict, tuple[int, int]]:
     """The network's detections for one image tensor, in the network's working size
     (image resized by its transform), with the masks still M x M per box: torchvision's own
-    postprocess pastes them half a pixel to a pixel off (see ``paste_mask``)."""
+    postprocess pastes them half a pixel to a pixel off (see ``paste_mask``). ``flip``: each
+    mask averaged with the mirror image's of the same box."""
     images, _ = model.transform([x])
     feats = model.backbone(images.tensors)
     proposals, _ = model.rpn(images, feats)
     det, _ = model.roi_heads(feats, proposals, images.image_sizes)
-    return det[0], tuple(images.image_sizes[0])
+    d = det[0]
+    if flip and len(d["boxes"]):
+        d["masks"] = 0.5 * (d["masks"] + _mirrored_masks(model, images, d))
+    return d, tuple(images.image_sizes[0])
+
+
+def mirror_boxes(boxes: torch.Tensor, width: int) -> torch.Tensor:
+    """Boxes (xyxy, pixel edges at integers) of a ``width``-wide tensor as their mask head must
+    see them in the mirrored tensor: mirrored, then moved one pixel left. RoIAlign (aligned=False,
+    as the mask head pools) samples a box half a pixel right of its frame; in the mirror image
+    that is half a pixel left of the plain pass's, so without the move the mirrored masks land
+    a pixel off (on 60 development renders blade IoU 0.750 instead of 0.767)."""
+    out = boxes.clone()
+    out[:, 0] = width - boxes[:, 2] - 1
+    out[:, 2] = width - boxes[:, 0] - 1
+    return out
+
+
+def _mirrored_masks(model, images, det: dict) -> torch.Tensor:
+    """(N, 1, M, M) soft masks of ``det``'s boxes from the mirrored image, mirrored back: the
+    backbone again on the mirrored (padded) tensor, the mask head on the mirrored boxes."""
+    feats = model.backbone(images.tensors.flip(-1))
+    rh = model.roi_heads
+    boxes = mirror_boxes(det["boxes"], images.tensors.shape[-1])
+    logits = rh.mask_predictor(rh.mask_head(rh.mask_roi_pool(feats, [boxes], images.image_sizes)))
+    labels = det["labels"]
+    soft = logits[torch.arange(len(labels), device=labels.device), labels].sigmoid()
+    return soft.flip(-1)[:, None].to(det["masks"].dtype)
 
 
 def paste_mask(out: np.ndarray, soft: np.ndarray, box, sx: float, sy: float,
@@ -207,7 +241,8 @@ def _turbine_groups(boxes: np.ndarray, grow: float = 0.25) -> list[np.ndarray]:
 
 
 def second_look(model: torch.nn.Module, image_bgr: np.ndarray, inst: Instances,
-                score_threshold: float, max_size: int | None = DEFAULT_MAX_SIZE) -> Instances:
+                score_threshold: float, max_size: int | None = DEFAULT_MAX_SIZE,
+                flip: bool = True) -> Instances:
     """Segment each small turbine again on a crop around it, and use those instances instead.
 
     The network works at 576 px high: a distant turbine's blades are then 1-3 px wide and come
@@ -237,7 +272,7 @@ def second_look(model: torch.nn.Module, image_bgr: np.ndarray, inst: Instances,
         X0 = int(round(np.clip((x0 + x1 - cw) / 2, 0, W - cw)))
         Y0 = int(round(np.clip((y0 + y1 - ch) / 2, 0, H - ch)))
         X1, Y1 = min(W, X0 + int(round(cw))), min(H, Y0 + int(round(ch)))
-        sub = predict(model, img[Y0:Y1, X0:X1], score_threshold, max_size)
+        sub = predict(model, img[Y0:Y1, X0:X1], score_threshold, max_size, flip=flip)
         b = sub.boxes
         cut = (((b[:, 0] <= 1) & (X0 > 0)) | ((b[:, 1] <= 1) & (Y0 > 0))
                | ((b[:, 2] >= X1 - X0 - 1) & (X1 < W)) | ((b[:, 3] >= Y1 - Y0 - 1) & (Y1 < H)))
@@ -267,7 +302,8 @@ def second_look(model: torch.nn.Module, image_bgr: np.ndarray, inst: Instances,
 def segment_image(image_bgr: np.ndarray, model: torch.nn.Module | None = None,
                   score_threshold: float = DEFAULT_SCORE_THRESHOLD, max_size: int | None = DEFAULT_MAX_SIZE,
                   device: str | None = None, weights: str | Path | None = None,
-                  candidate_floor: float | None = CANDIDATE_FLOOR, zoom: bool = True) -> Instances:
+                  candidate_floor: float | None = CANDIDATE_FLOOR, zoom: bool = True,
+                  flip: bool = True) -> Instances:
     """The one call other stages use: segment a BGR photo with the shipped model (loaded lazily
     and cached) or the ``model`` given.
 
@@ -277,13 +313,14 @@ def segment_image(image_bgr: np.ndarray, model: torch.nn.Module | None = None,
     (give it the same one). ``inst[inst.scores >= score_threshold]`` is the segmentation alone;
     without ``zoom`` it is the same as predicting at that threshold (duplicates are dropped
     greedily by score). ``zoom``: small turbines get a ``second_look`` (at the lower threshold,
-    as ``segment --score-threshold 0.2`` does, so files chain to the same result)."""
+    as ``segment --score-threshold 0.2`` does, so files chain to the same result). ``flip``: as
+    ``predict``'s."""
     if model is None:
         model = load_model(weights, device)
     floor = score_threshold if candidate_floor is None else min(candidate_floor, score_threshold)
-    inst = predict(model, image_bgr, floor, max_size)
+    inst = predict(model, image_bgr, floor, max_size, flip=flip)
     if zoom:
-        inst = second_look(model, image_bgr, inst, floor, max_size)
+        inst = second_look(model, image_bgr, inst, floor, max_size, flip)
     if not len(inst) or floor >= score_threshold:
         return inst
     return inst[(inst.scores >= score_threshold) | (inst.labels == "blade")]
