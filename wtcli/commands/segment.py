@@ -24,8 +24,9 @@ def segment(
                               help="Segment each small (distant) turbine again on a crop around "
                                    "it: its blades come out fuller and its angles truer."),
     flip: bool = typer.Option(True, "--flip/--no-flip",
-                              help="Average each mask with the mirrored photo's (truer thin "
-                                   "blades; --no-flip: about 1.7x faster)."),
+                              help="Detect the photo and its mirror image together (fewer "
+                                   "missed blades, truer thin ones; --no-flip: about 2x "
+                                   "faster)."),
     device: str = typer.Option("auto", "--device", help="auto (GPU if present) | cpu | cuda[:N]."),
     precision: str = typer.Option("auto", "--precision",
                                   help="auto | fp32 | bf16. auto: the backbone in bfloat16 on a "

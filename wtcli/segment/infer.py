@@ -5,8 +5,9 @@ Large photos (a 5472x3648 drone frame) are first downscaled so their longer side
 predicted M x M box mask is then pasted straight into the ORIGINAL image size (``paste_mask``)
 and thresholded, so masks, boxes and the background-removed image line up with the
 photo. Masks are pasted one instance at a time, into their box only, and cut at
-``MASK_THRESHOLD`` of their class. With ``flip`` (the default) each soft mask is the mean of the
-network's mask for the photo and for its mirror image (``_mirrored_masks``).
+``MASK_THRESHOLD`` of their class. With ``flip`` (the default) the photo and its mirror image
+are detected together: proposals, class scores, boxes and masks of both passes averaged
+(``_detect_both``).
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 import torch
+from torchvision.models.detection.image_list import ImageList
+from torchvision.ops import boxes as box_ops
 
 from wtcli.errors import InputError
 from wtcli.masks import LABELS, Instances
@@ -28,6 +31,7 @@ from wtcli.segment.model import (backbone_in_bf16, build_model, load_weights, pi
 DEFAULT_MAX_SIZE = 1600
 DEFAULT_SCORE_THRESHOLD = 0.5
 MASK_OFFSET_PX = 0.5  # see paste_mask; weights trained with area-resized masks
+MIRROR_BOX_SHIFT_PX = 0.5  # see unmirror_boxes
 # Where each class's soft mask is cut. Blades at 0.45: on 200 development renders (seeds
 # 7 000 000 +, run 13) blade IoU 0.742 against 0.735 at 0.5 (0.737 at 0.4, 0.715 at 0.55): the
 # soft edge of a blade a few pixels wide comes out a little below 0.5. Tower and nacelle peak
@@ -78,10 +82,9 @@ def predict(model: torch.nn.Module, image_bgr: np.ndarray, score_threshold: floa
             max_size: int | None = DEFAULT_MAX_SIZE, device=None, flip: bool = True) -> Instances:
     """Instances (labels, masks at the image's size, scores, boxes xyxy) with score >= threshold.
 
-    ``flip``: average each mask with the mirror image's (the boxes and scores are the plain
-    pass's); about 1.7 x the time. On 300 development renders (run 14, second look) blade /
-    tower / nacelle IoU 0.757 / 0.855 / 0.768 -> 0.767 / 0.863 / 0.779: the two passes' pixel
-    jitter on thin blades partly cancels."""
+    ``flip``: detect the photo and its mirror image together (``_detect_both``); about 2 x
+    the time. On 300 development renders (run 14, second look) blade / tower / nacelle IoU
+    0.757 / 0.855 / 0.768 without -> 0.774 / 0.867 / 0.778 with."""
     img = np.asarray(image_bgr)
     if img.ndim == 2:
         img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
@@ -159,22 +162,21 @@ def drop_duplicate_blades(inst: Instances, inside: float = DUPLICATE_INSIDE) -> 
 def _detect(model, x: torch.Tensor, flip: bool = False) -> tuple[dict, tuple[int, int]]:
     """The network's detections for one image tensor, in the network's working size
     (image resized by its transform), with the masks still M x M per box: torchvision's own
-    postprocess pastes them half a pixel to a pixel off (see ``paste_mask``). ``flip``: each
-    mask averaged with the mirror image's of the same box."""
+    postprocess pastes them half a pixel to a pixel off (see ``paste_mask``). ``flip``: the
+    photo and its mirror image detected together (``_detect_both``)."""
     images, _ = model.transform([x])
     feats = model.backbone(images.tensors)
+    if flip:
+        return _detect_both(model, images, feats), tuple(images.image_sizes[0])
     proposals, _ = model.rpn(images, feats)
     det, _ = model.roi_heads(feats, proposals, images.image_sizes)
-    d = det[0]
-    if flip and len(d["boxes"]):
-        d["masks"] = 0.5 * (d["masks"] + _mirrored_masks(model, images, d))
-    return d, tuple(images.image_sizes[0])
+    return det[0], tuple(images.image_sizes[0])
 
 
 def mirror_boxes(boxes: torch.Tensor, width: int) -> torch.Tensor:
-    """Boxes (xyxy, pixel edges at integers) of a ``width``-wide tensor as their mask head must
-    see them in the mirrored tensor: mirrored, then moved one pixel left. RoIAlign (aligned=False,
-    as the mask head pools) samples a box half a pixel right of its frame; in the mirror image
+    """Boxes (xyxy, pixel edges at integers) of a ``width``-wide tensor as the heads must pool
+    them in the mirrored tensor: mirrored, then moved one pixel left. RoIAlign (aligned=False,
+    as both heads pool) samples a box half a pixel right of its frame; in the mirror image
     that is half a pixel left of the plain pass's, so without the move the mirrored masks land
     a pixel off (on 60 development renders blade IoU 0.750 instead of 0.767)."""
     out = boxes.clone()
@@ -183,16 +185,76 @@ def mirror_boxes(boxes: torch.Tensor, width: int) -> torch.Tensor:
     return out
 
 
-def _mirrored_masks(model, images, det: dict) -> torch.Tensor:
-    """(N, 1, M, M) soft masks of ``det``'s boxes from the mirrored image, mirrored back: the
-    backbone again on the mirrored (padded) tensor, the mask head on the mirrored boxes."""
-    feats = model.backbone(images.tensors.flip(-1))
+def unmirror_boxes(boxes: torch.Tensor, width: int) -> torch.Tensor:
+    """Boxes (..., 4) the box head found in the mirrored ``width``-wide tensor, in the photo's
+    frame: mirrored back and moved half a pixel left. Measured: the box head regressing from
+    the true boxes of 40 development renders (run 14) reads them 0.46 px right of the truth
+    (median) in the mirrored pass with the plain mirror, 0.0 in the plain pass."""
+    out = boxes.clone()
+    out[..., 0] = width - MIRROR_BOX_SHIFT_PX - boxes[..., 2]
+    out[..., 2] = width - MIRROR_BOX_SHIFT_PX - boxes[..., 0]
+    return out
+
+
+def _detect_both(model, images, feats: dict) -> dict:
+    """Detections of the photo and its mirror image together: the region proposals of both
+    passes (those of the mirror mirrored back), each scored and regressed by the box head in
+    both passes and the two averaged (class probabilities; boxes, the mirror's mirrored back),
+    then torchvision's selection (score floor, per-class NMS, the best
+    ``detections_per_img``); each kept box's mask is the mean of both passes' masks.
+
+    A detection one pass scores low is kept when the other scores it well, and the two passes'
+    pixel jitter on thin blades partly cancels. On 300 development renders
+    (run 14, second look) blade / tower / nacelle IoU 0.767 / 0.862 / 0.779 with the masks
+    alone averaged -> 0.774 / 0.867 / 0.778; on the real photos blade 0.707 -> 0.719."""
     rh = model.roi_heads
-    boxes = mirror_boxes(det["boxes"], images.tensors.shape[-1])
-    logits = rh.mask_predictor(rh.mask_head(rh.mask_roi_pool(feats, [boxes], images.image_sizes)))
-    labels = det["labels"]
-    soft = logits[torch.arange(len(labels), device=labels.device), labels].sigmoid()
-    return soft.flip(-1)[:, None].to(det["masks"].dtype)
+    T = images.tensors.flip(-1)
+    W = T.shape[-1]
+    h, w = images.image_sizes[0]
+    feats_m = model.backbone(T)
+    # The padded tensor's photo sits at its right in the mirror: the mirror's "image" is the
+    # whole width, and proposals starting in the padding are dropped once mirrored back.
+    mirror_size = [(h, W)]
+    p_plain = model.rpn(images, feats)[0][0]
+    p_mirror = model.rpn(ImageList(T, mirror_size), feats_m)[0][0]
+    p_mirror = torch.stack([W - p_mirror[:, 2], p_mirror[:, 1], W - p_mirror[:, 0], p_mirror[:, 3]], 1)
+    proposals = box_ops.clip_boxes_to_image(
+        torch.cat([p_plain, p_mirror[p_mirror[:, 0] < w - 1]]), (h, w))
+    prob, boxes = _box_head(model, feats, proposals, images.image_sizes)
+    prob_m, boxes_m = _box_head(model, feats_m, mirror_boxes(proposals, W), mirror_size)
+    prob = 0.5 * (prob + prob_m)
+    boxes = 0.5 * (boxes + unmirror_boxes(boxes_m, W))
+    # torchvision's RoIHeads.postprocess_detections from here on, on the averaged values
+    C = prob.shape[-1]
+    boxes = box_ops.clip_boxes_to_image(boxes.reshape(-1, 4), (h, w)).reshape(-1, C, 4)
+    labels = torch.arange(C, device=prob.device).view(1, -1).expand_as(prob)
+    boxes, scores, labels = boxes[:, 1:].reshape(-1, 4), prob[:, 1:].reshape(-1), labels[:, 1:].reshape(-1)
+    keep = torch.where(scores > rh.score_thresh)[0]
+    boxes, scores, labels = boxes[keep], scores[keep], labels[keep]
+    keep = box_ops.remove_small_boxes(boxes, min_size=1e-2)
+    boxes, scores, labels = boxes[keep], scores[keep], labels[keep]
+    keep = box_ops.batched_nms(boxes, scores, labels, rh.nms_thresh)[: rh.detections_per_img]
+    boxes, scores, labels = boxes[keep], scores[keep], labels[keep]
+    masks = 0.5 * (_mask_probs(model, feats, boxes, labels, images.image_sizes)
+                   + _mask_probs(model, feats_m, mirror_boxes(boxes, W), labels, mirror_size).flip(-1))
+    return {"boxes": boxes, "labels": labels, "scores": scores, "masks": masks[:, None]}
+
+
+def _box_head(model, feats: dict, proposals: torch.Tensor, sizes) -> tuple[torch.Tensor, torch.Tensor]:
+    """(N, C) class probabilities and (N, C, 4) decoded boxes of the proposals."""
+    rh = model.roi_heads
+    logits, deltas = rh.box_predictor(rh.box_head(rh.box_roi_pool(feats, [proposals], sizes)))
+    return torch.softmax(logits.float(), -1), rh.box_coder.decode(deltas.float(), [proposals])
+
+
+def _mask_probs(model, feats: dict, boxes: torch.Tensor, labels: torch.Tensor, sizes) -> torch.Tensor:
+    """(N, M, M) mask probabilities of each box for its label."""
+    if not len(boxes):
+        M = 2 * model.roi_heads.mask_roi_pool.output_size[0]
+        return torch.zeros((0, M, M), device=boxes.device)
+    rh = model.roi_heads
+    logits = rh.mask_predictor(rh.mask_head(rh.mask_roi_pool(feats, [boxes], sizes)))
+    return logits[torch.arange(len(labels), device=labels.device), labels].float().sigmoid()
 
 
 def paste_mask(out: np.ndarray, soft: np.ndarray, box, sx: float, sy: float,
