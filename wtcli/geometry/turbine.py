@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from wtcli.geometry import clearance_kernel
+
 Z = np.array([0.0, 0.0, 1.0])
 
 BLADE_SIDES = ("leading_edge", "pressure_side", "trailing_edge", "suction_side")
@@ -249,22 +251,29 @@ class Turbine:
     def clearance(self, points: np.ndarray, cap: float | None = None) -> np.ndarray:
         """Distance (m) from each point to the nearest part of the turbine; (M,) for (M, 3).
 
-        The same values as ``clearance_by_part(points, cap).min(axis=1)``, cheaper: a part's
-        exact distance is skipped where its bound is already at least the least exact distance
-        of the parts done before it (the hub and nacelle, exact and cheap, go first), since that
-        part cannot be the nearest."""
-        P = np.atleast_2d(np.asarray(points, dtype=float))
-        best = np.minimum(self._nacelle_distance(P), self._hub_distance(P))
-        limit = best if cap is None else np.minimum(best, cap)
-        blades, local, bound = self._blade_bounds(P)
-        self._blade_exact(blades, local, bound < limit[:, None])
-        best = np.minimum(best, blades.min(axis=1)) if blades.shape[1] else best
-        limit = best if cap is None else np.minimum(best, cap)
-        tower = self._tower_bound(P)
-        near = tower < limit
-        if near.any():
-            tower[near] = self._tower_distance(P[near])
-        return np.minimum(best, tower)
+        The same values as ``clearance_by_part(points, cap).min(axis=1)``, cheaper: compiled
+        (``clearance_kernel``), and a part's exact distance is skipped where its bound is
+        already at least the least exact distance of the parts done before it (the hub and
+        nacelle, exact and cheap, go first), since that part cannot be the nearest."""
+        P = np.ascontiguousarray(np.atleast_2d(np.asarray(points, dtype=float)))
+        if P.ndim != 2 or P.shape[1] != 3:
+            raise ValueError(f"expected points of shape (M, 3), got {P.shape}")
+        vec, sc, frames = self._cached("kernel_params", self._kernel_params)
+        return clearance_kernel.clearance(P, vec, sc, frames, math.inf if cap is None else float(cap))
+
+    def _kernel_params(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The turbine as ``clearance_kernel.clearance`` reads it: points (hub, nacelle centre,
+        rotor axis, nacelle side, nacelle half sizes, tower base), scalars, blade frames."""
+        a, side, half = self._cached("nacelle_frame", self._nacelle_frame)
+        vec = np.array([self.hub_center, self.nacelle_center, a, side, half, self.base_xyz])
+        sc = np.array([self.hub_radius, self.tower_height, self.tower_base_radius,
+                       self.tower_top_radius, self.blade_root_offset, self.tip_radius,
+                       self._blade_taper_cos(), _MAX_CHORD_AT, self.blade_root_chord,
+                       self.blade_max_chord, self.blade_tip_chord, _ROOT_THICKNESS_RATIO,
+                       _MAX_CHORD_THICKNESS_RATIO, _TIP_THICKNESS_RATIO], dtype=float)
+        frames = np.array([self.blade_frame(k) for k in range(self.n_blades)],
+                          dtype=float).reshape(-1, 3, 3)
+        return vec, sc, frames
 
     def _blade_bounds(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(values, local, bound), each (M, n_blades) or (M, n_blades, 3): the blade bounds of
@@ -297,11 +306,13 @@ class Turbine:
         values[near] = np.hypot(inplane, beyond)
 
     def _tower_bound(self, P: np.ndarray) -> np.ndarray:
-        # The frustum lies inside the cylinder of its base radius.
+        # The frustum lies inside the cylinder of its larger radius (the base's, unless a
+        # turbines.yaml gives a wider top: the base's alone was then no lower bound).
         q = P - self.base_xyz
         rho = np.hypot(q[:, 0], q[:, 1])
         dz = np.maximum(np.maximum(-q[:, 2], q[:, 2] - self.tower_height), 0.0)
-        return np.hypot(np.maximum(rho - self.tower_base_radius, 0.0), dz)
+        r = max(self.tower_base_radius, self.tower_top_radius)
+        return np.hypot(np.maximum(rho - r, 0.0), dz)
 
     def segment_clearance(self, p0: np.ndarray, p1: np.ndarray, step: float = 0.5) -> np.ndarray:
         """A lower bound of the clearance along each straight segment p0[i] -> p1[i].
@@ -358,13 +369,15 @@ class Turbine:
         return np.maximum(np.linalg.norm(P - self.hub_center, axis=1) - self.hub_radius, 0.0)
 
     def _nacelle_distance(self, P: np.ndarray) -> np.ndarray:
-        a, side, half = self._cached("nacelle_frame", lambda: (
-            self.axis, np.cross(Z, self.axis),
-            np.array([self.nacelle_length, self.nacelle_width, self.nacelle_height]) / 2.0))
+        a, side, half = self._cached("nacelle_frame", self._nacelle_frame)
         q = P - self.nacelle_center
         local = np.stack([q @ a, q @ side, q @ Z], axis=1)
         e = np.maximum(np.abs(local) - half, 0.0)
         return np.sqrt((e * e).sum(axis=1))
+
+    def _nacelle_frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return (self.axis, np.cross(Z, self.axis),
+                np.array([self.nacelle_length, self.nacelle_width, self.nacelle_height]) / 2.0)
 
     def _tower_distance(self, P: np.ndarray) -> np.ndarray:
         q = P - self.base_xyz
