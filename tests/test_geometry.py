@@ -284,3 +284,32 @@ def test_a_tower_wider_at_the_top_is_still_bounded_from_below():
     assert t.clearance(p[None])[0] == 0.0
     assert t.clearance(p[None], cap=6.0)[0] == 0.0
     assert t.clearance_by_part(p[None], cap=1.0)[0, t.part_names().index("tower")] == 0.0
+
+
+def test_clearance_kernel_compiles_where_numba_cannot_cache(monkeypatch):
+    """A read-only install without a writable cache folder: numba refuses cache=True at
+    decoration; the kernel module then compiles without caching and gives the same values."""
+    import importlib
+
+    import numba
+
+    from wtcli.geometry import clearance_kernel
+
+    real = numba.njit
+
+    def no_cache(*a, **kw):
+        if kw.get("cache"):
+            raise RuntimeError("cannot cache function: no locator available")
+        return real(*a, **kw)
+
+    t = make_turbine(az=20.0, yaw=50.0)
+    P = t.hub_center + np.random.default_rng(3).normal(size=(200, 3)) * 30
+    want = t.clearance(P, cap=6.0)
+    monkeypatch.setattr(numba, "njit", no_cache)
+    fresh = importlib.reload(clearance_kernel)
+    try:
+        vec, sc, frames = t._kernel_params()
+        assert np.array_equal(fresh.clearance(np.ascontiguousarray(P), vec, sc, frames, 6.0), want)
+    finally:
+        monkeypatch.setattr(numba, "njit", real)
+        importlib.reload(clearance_kernel)

@@ -20,8 +20,16 @@ import math
 import numba
 import numpy as np
 
-# cache=True: compiled once per machine (about a second), then loaded from __pycache__.
-_jit = numba.njit(cache=True, fastmath=False, nogil=True)
+
+
+def _jit(fn):
+    """Compiled once per machine (about a second), then loaded from numba's cache (the package's
+    __pycache__, else the user's cache folder). Where neither is writable (a read-only install
+    and no home) numba refuses to cache: compile in each process instead."""
+    try:
+        return numba.njit(cache=True, fastmath=False, nogil=True)(fn)
+    except RuntimeError:
+        return numba.njit(cache=False, fastmath=False, nogil=True)(fn)
 
 
 @_jit
