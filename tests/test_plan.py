@@ -1002,3 +1002,14 @@ def test_horizontal_blade_face_down_is_refused_naming_the_gimbal():
     with pytest.raises(PlanError, match=r"blade1 pressure_side: predicted coverage .*gimbal's "
                                         r"pitch range \[-90, \+20\] deg.*turn the rotor"):
         plan_mission(_gimbal_mission((0.0, 120.0, 240.0), 20.0))
+
+
+def test_site_clearance_of_a_nan_point_is_nan():
+    """A NaN point never reads as clear (it falls outside the grid, and read the cull
+    distance, 60 m, before)."""
+    from wtcli.plan.safety import Site
+
+    site = Site([make_turbine(tid="T1")])
+    got = site.clearance(np.array([[np.nan, 0.0, 80.0], [0.0, 0.0, 500.0]]))
+    assert np.isnan(got[0]) and got[1] == site.horizon
+    assert np.isnan(Site([]).clearance(np.array([[0.0, np.nan, 1.0]]))).all()

@@ -197,6 +197,7 @@ class Site:
         out = np.full(len(P), grow)
         for i, idx in self._groups(P, grow):
             out[idx] = np.minimum(out[idx], self._turbine_clearance(self.turbines[i], P[idx], cap))
+        out[np.isnan(P).any(axis=1)] = np.nan  # outside the grid, but never "clear"
         return out
 
     def _turbine_clearance(self, t: Turbine, P: np.ndarray, cap: float) -> np.ndarray:
