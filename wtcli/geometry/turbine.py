@@ -23,8 +23,6 @@ from typing import Any
 
 import numpy as np
 
-from wtcli.geometry import clearance_kernel
-
 Z = np.array([0.0, 0.0, 1.0])
 
 BLADE_SIDES = ("leading_edge", "pressure_side", "trailing_edge", "suction_side")
@@ -258,6 +256,10 @@ class Turbine:
         P = np.ascontiguousarray(np.atleast_2d(np.asarray(points, dtype=float)))
         if P.ndim != 2 or P.shape[1] != 3:
             raise ValueError(f"expected points of shape (M, 3), got {P.shape}")
+        # Imported here: numba takes ~0.2 s to load, which commands that never ask for a
+        # clearance (segment, contours, pitch) need not pay.
+        from wtcli.geometry import clearance_kernel
+
         vec, sc, frames = self._cached("kernel_params", self._kernel_params)
         return clearance_kernel.clearance(P, vec, sc, frames, math.inf if cap is None else float(cap))
 
