@@ -21,7 +21,6 @@ import numba
 import numpy as np
 
 
-
 def _jit(fn):
     """Compiled once per machine (about a second), then loaded from numba's cache (the package's
     __pycache__, else the user's cache folder). Where neither is writable (a read-only install
@@ -84,7 +83,7 @@ def _tower(rho: float, h: float, H: float, rb: float, rt: float) -> float:
 def clearance(P: np.ndarray, vec: np.ndarray, sc: np.ndarray, frames: np.ndarray,
               cap: float) -> np.ndarray:
     """(M,) clearance of the points P (M, 3); ``vec``, ``sc``, ``frames`` from
-    ``kernel_params``; ``cap`` inf for none."""
+    ``Turbine._kernel_params``; ``cap`` inf for none."""
     out = np.empty(P.shape[0])
     hub, nac, axis, side, half, base = vec[0], vec[1], vec[2], vec[3], vec[4], vec[5]
     hub_r, H, rb, rt = sc[0], sc[1], sc[2], sc[3]

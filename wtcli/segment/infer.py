@@ -217,6 +217,7 @@ def _detect_both(model, images, feats: dict) -> dict:
     mirror_size = [(h, W)]
     p_plain = model.rpn(images, feats)[0][0]
     p_mirror = model.rpn(ImageList(T, mirror_size), feats_m)[0][0]
+    # Proposals are mirrored back exactly: they only need to be near, the box head refines them.
     p_mirror = torch.stack([W - p_mirror[:, 2], p_mirror[:, 1], W - p_mirror[:, 0], p_mirror[:, 3]], 1)
     proposals = box_ops.clip_boxes_to_image(
         torch.cat([p_plain, p_mirror[p_mirror[:, 0] < w - 1]]), (h, w))
