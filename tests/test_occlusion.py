@@ -154,3 +154,6 @@ def test_the_pair_search_finds_every_pair_a_full_search_finds(seed):
     p, i = np.nonzero(ok)
     assert len(p) > 100  # the cases do see the surface
     assert sorted(zip(got[0].tolist(), got[1].tolist())) == sorted(zip(i.tolist(), p.tolist()))
+    # Photo-major (measure_coverage's tie order), with each pair's GSD.
+    assert (np.diff(got[1]) >= 0).all()
+    np.testing.assert_array_equal(got[2], cam.gsd_mm(np.linalg.norm(s.points[got[0]] - pos[got[1]], axis=1)))

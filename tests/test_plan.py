@@ -349,7 +349,7 @@ def random_case(rng: np.random.Generator, gimbal: bool = False) -> Mission:
     for i in range(n):
         R = float(rng.uniform(20, 75))
         ts.append(Turbine.with_rotor_azimuth(
-            float(rng.uniform(0, 360)), id=f"T{i + 1}",
+            float(rng.uniform(0, 360)), blades=(3, 2, 4, 1)[i % 4], id=f"T{i + 1}",
             base=(float(i * rng.uniform(2.5, 4) * 2 * R), float(rng.uniform(-50, 50)),
                   float(rng.uniform(0, 20))),
             hub_height=float(rng.uniform(R + 10, R + 60)), rotor_diameter=2 * R,
@@ -366,7 +366,8 @@ def random_case(rng: np.random.Generator, gimbal: bool = False) -> Mission:
 # ---- the site's culled clearance ---------------------------------------------------------------------
 def _odd_site(rng: np.random.Generator, n: int):
     """n turbines a few hundred metres apart, boxes overlapping; every third with odd part sizes
-    (a wide chord, a tiny nacelle and hub, a thick tower)."""
+    (a wide chord, a tiny nacelle and hub, a thick tower); one to four blades (the compiled site
+    query stacks turbines of different blade counts)."""
     from wtcli.plan.safety import Site
 
     ts = []
@@ -375,7 +376,7 @@ def _odd_site(rng: np.random.Generator, n: int):
         odd = (dict(blade_max_chord=0.2 * R, nacelle_length=1.0, hub_radius=1.0, tower_base_radius=5.0)
                if i % 3 == 2 else {})
         ts.append(Turbine.with_rotor_azimuth(
-            float(rng.uniform(0, 360)), id=f"T{i + 1}",
+            float(rng.uniform(0, 360)), blades=(3, 2, 4, 1)[i % 4], id=f"T{i + 1}",
             base=(float(rng.uniform(-250, 250)), float(rng.uniform(-250, 250)), float(rng.uniform(0, 20))),
             hub_height=float(rng.uniform(R + 5, R + 50)), rotor_diameter=2 * R,
             yaw_deg=float(rng.uniform(0, 360)), blade_pitch_deg=float(rng.uniform(60, 90)), **odd))

@@ -21,14 +21,21 @@ import numba
 import numpy as np
 
 
-def _jit(fn):
+def _jit(fn=None, *, inline: bool = False):
     """Compiled once per machine (about a second), then loaded from numba's cache (the package's
     __pycache__, else the user's cache folder). Where neither is writable (a read-only install
-    and no home) numba refuses to cache: compile in each process instead."""
+    and no home) numba refuses to cache: compile in each process instead.
+
+    ``inline``: compiled into each caller (``@_jit(inline=True)``). A per-point helper that
+    takes arrays must be: a real call passes each array as a reference-counted structure, which
+    cost 3x the distance itself (measured on the site's kernel)."""
+    if fn is None:
+        return lambda f: _jit(f, inline=inline)
+    opts = dict(fastmath=False, nogil=True, inline="always" if inline else "never")
     try:
-        return numba.njit(cache=True, fastmath=False, nogil=True)(fn)
+        return numba.njit(cache=True, **opts)(fn)
     except RuntimeError:
-        return numba.njit(cache=False, fastmath=False, nogil=True)(fn)
+        return numba.njit(cache=False, **opts)(fn)
 
 
 @_jit
@@ -85,47 +92,52 @@ def clearance(P: np.ndarray, vec: np.ndarray, sc: np.ndarray, frames: np.ndarray
     """(M,) clearance of the points P (M, 3); ``vec``, ``sc``, ``frames`` from
     ``Turbine._kernel_params``; ``cap`` inf for none."""
     out = np.empty(P.shape[0])
-    hub, nac, axis, side, half, base = vec[0], vec[1], vec[2], vec[3], vec[4], vec[5]
-    hub_r, H, rb, rt = sc[0], sc[1], sc[2], sc[3]
-    s0, s1, taper, at = sc[4], sc[5], sc[6], sc[7]
-    c0, c1, c2, r0, r1, r2 = sc[8], sc[9], sc[10], sc[11], sc[12], sc[13]
+    V, S, F = vec.reshape(1, 6, 3), sc.reshape(1, -1), frames.reshape(1, -1, 3, 3)
     for i in range(P.shape[0]):
-        px, py, pz = P[i, 0], P[i, 1], P[i, 2]
-        if math.isnan(px) or math.isnan(py) or math.isnan(pz):
-            out[i] = np.nan
-            continue
-        # hub and nacelle first: exact and cheap
-        dx, dy, dz = px - hub[0], py - hub[1], pz - hub[2]
-        best = max(math.sqrt(dx * dx + dy * dy + dz * dz) - hub_r, 0.0)
-        qx, qy, qz = px - nac[0], py - nac[1], pz - nac[2]
-        e0 = max(abs(qx * axis[0] + qy * axis[1] + qz * axis[2]) - half[0], 0.0)
-        e1 = max(abs(qx * side[0] + qy * side[1] + qz * side[2]) - half[1], 0.0)
-        e2 = max(abs(qz) - half[2], 0.0)
-        best = min(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2), best)
-        # blades: exact only where the capsule bound is below what the hub/nacelle give
-        limit = min(best, cap)
-        blades = np.inf
-        for k in range(frames.shape[0]):
-            F = frames[k]
-            s = dx * F[0, 0] + dy * F[0, 1] + dz * F[0, 2]
-            u = dx * F[1, 0] + dy * F[1, 1] + dz * F[1, 2]
-            v = dx * F[2, 0] + dy * F[2, 1] + dz * F[2, 2]
-            f = (min(max(s, s0), s1) - s0) / (s1 - s0)
-            chord = _knots(f, at, c0, c1, c2)
-            A = chord / 2.0
-            beyond = max(s - s1, 0.0) + max(s0 - s, 0.0)
-            d = math.hypot(max(math.hypot(u, v) - A, 0.0) * taper, beyond)
-            if d < limit:
-                B = _knots(f, at, r0, r1, r2) * chord / 2.0
-                d = math.hypot(_ellipse_distance(u, v, A, B) * taper, beyond)
-            blades = min(blades, d)
-        best = min(best, blades)
-        # tower: exact only where the bound of its enclosing cylinder (the larger radius) is
-        # below the best so far
-        tx, ty, tz = px - base[0], py - base[1], pz - base[2]
-        rho = math.hypot(tx, ty)
-        d = math.hypot(max(rho - max(rb, rt), 0.0), max(max(-tz, tz - H), 0.0))
-        if d < min(best, cap):
-            d = _tower(rho, tz, H, rb, rt)
-        out[i] = min(best, d)
+        out[i] = point_clearance(P[i, 0], P[i, 1], P[i, 2], V, S, F, 0, frames.shape[0], cap)
     return out
+
+
+@_jit(inline=True)
+def point_clearance(px: float, py: float, pz: float, vec: np.ndarray, sc: np.ndarray,
+                    frames: np.ndarray, t: int, blades: int, cap: float) -> float:
+    """``clearance`` of one point to turbine ``t`` of stacked parameters (vec (T, 6, 3), sc
+    (T, 14), frames (T, B, 3, 3), its first ``blades`` real)."""
+    if math.isnan(px) or math.isnan(py) or math.isnan(pz):
+        return np.nan
+    hub_r, H, rb, rt = sc[t, 0], sc[t, 1], sc[t, 2], sc[t, 3]
+    s0, s1, taper, at = sc[t, 4], sc[t, 5], sc[t, 6], sc[t, 7]
+    c0, c1, c2, r0, r1, r2 = sc[t, 8], sc[t, 9], sc[t, 10], sc[t, 11], sc[t, 12], sc[t, 13]
+    # hub and nacelle first: exact and cheap
+    dx, dy, dz = px - vec[t, 0, 0], py - vec[t, 0, 1], pz - vec[t, 0, 2]
+    best = max(math.sqrt(dx * dx + dy * dy + dz * dz) - hub_r, 0.0)
+    qx, qy, qz = px - vec[t, 1, 0], py - vec[t, 1, 1], pz - vec[t, 1, 2]
+    e0 = max(abs(qx * vec[t, 2, 0] + qy * vec[t, 2, 1] + qz * vec[t, 2, 2]) - vec[t, 4, 0], 0.0)
+    e1 = max(abs(qx * vec[t, 3, 0] + qy * vec[t, 3, 1] + qz * vec[t, 3, 2]) - vec[t, 4, 1], 0.0)
+    e2 = max(abs(qz) - vec[t, 4, 2], 0.0)
+    best = min(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2), best)
+    # blades: exact only where the capsule bound is below what the hub/nacelle give
+    limit = min(best, cap)
+    blades_d = np.inf
+    for k in range(blades):
+        s = dx * frames[t, k, 0, 0] + dy * frames[t, k, 0, 1] + dz * frames[t, k, 0, 2]
+        u = dx * frames[t, k, 1, 0] + dy * frames[t, k, 1, 1] + dz * frames[t, k, 1, 2]
+        v = dx * frames[t, k, 2, 0] + dy * frames[t, k, 2, 1] + dz * frames[t, k, 2, 2]
+        f = (min(max(s, s0), s1) - s0) / (s1 - s0)
+        chord = _knots(f, at, c0, c1, c2)
+        A = chord / 2.0
+        beyond = max(s - s1, 0.0) + max(s0 - s, 0.0)
+        d = math.hypot(max(math.hypot(u, v) - A, 0.0) * taper, beyond)
+        if d < limit:
+            B = _knots(f, at, r0, r1, r2) * chord / 2.0
+            d = math.hypot(_ellipse_distance(u, v, A, B) * taper, beyond)
+        blades_d = min(blades_d, d)
+    best = min(best, blades_d)
+    # tower: exact only where the bound of its enclosing cylinder (the larger radius) is
+    # below the best so far
+    tx, ty, tz = px - vec[t, 5, 0], py - vec[t, 5, 1], pz - vec[t, 5, 2]
+    rho = math.hypot(tx, ty)
+    d = math.hypot(max(rho - max(rb, rt), 0.0), max(max(-tz, tz - H), 0.0))
+    if d < min(best, cap):
+        d = _tower(rho, tz, H, rb, rt)
+    return min(best, d)

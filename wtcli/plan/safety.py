@@ -85,6 +85,7 @@ class Site:
         self._build_ground_grid()
         self._hubs = np.array([t.hub_center for t in self.turbines]).reshape(-1, 3)
         self._build_grid()
+        self._grid_args: tuple | None = None
 
     # ---- the grid of boxes ------------------------------------------------------------------
     def _build_grid(self) -> None:
@@ -120,64 +121,33 @@ class Site:
         is the model's only shortfall); the small addition covers rounding."""
         return min(self.horizon, cap / self._taper_min + 0.01)
 
-    def _pairs(self, P: np.ndarray, grow: float) -> tuple[np.ndarray, np.ndarray]:
-        """(point index, turbine index) for every point inside a turbine's box grown by ``grow``
-        (<= the horizon), ordered by turbine, then point (the same index sets, in the same order,
-        as testing every box)."""
-        f = np.floor((P[:, :2] - self._origin) / self._cell)
-        # Outside the grid (or NaN): outside every box, by the same monotonicity.
-        ok = ((f >= 0) & (f < self._shape)).all(axis=1)
-        if ok.all() and len(P) and (f == f[0]).all():
-            return self._pairs_in_cell(P, grow, int(f[0, 0]) * int(self._shape[1]) + int(f[0, 1]))
-        pt = np.nonzero(ok)[0]
-        cell = f[pt, 0].astype(np.int64) * self._shape[1] + f[pt, 1].astype(np.int64)
-        first = self._start[cell]
-        count = self._start[cell + 1] - first
-        pp = np.repeat(pt, count)
-        k = np.arange(len(pp)) - np.repeat(np.cumsum(count) - count, count)
-        tt = self._members[np.repeat(first, count) + k]
-        Q = P[pp]
-        if grow == self.horizon:
-            inside = ((Q >= self.lo[tt]) & (Q <= self.hi[tt])).all(axis=1)
-        else:
-            lo, hi = self.part_lo[tt] - grow, self.part_hi[tt] + grow
-            inside = ((Q[:, None] >= lo) & (Q[:, None] <= hi)).all(axis=2).any(axis=1)
-        pp, tt = pp[inside], tt[inside]
-        order = np.argsort(tt, kind="stable")
-        return pp[order], tt[order]
-
-    def _pairs_in_cell(self, P: np.ndarray, grow: float, cell: int) -> tuple[np.ndarray, np.ndarray]:
-        """``_pairs`` when every point lies in one cell (most queries: a leg or a few points
-        near one turbine): the same pairs, the same order, a box at a time."""
-        pps, tts = [], []
-        for t in self._members[self._start[cell]:self._start[cell + 1]]:  # ascending
-            if grow == self.horizon:
-                inside = ((P >= self.lo[t]) & (P <= self.hi[t])).all(axis=1)
-            else:
-                lo, hi = self.part_lo[t] - grow, self.part_hi[t] + grow
-                inside = ((P[:, None] >= lo) & (P[:, None] <= hi)).all(axis=2).any(axis=1)
-            idx = np.nonzero(inside)[0]
-            pps.append(idx)
-            tts.append(np.full(len(idx), t, np.int64))
-        if not pps:
-            return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        return np.concatenate(pps), np.concatenate(tts)
-
-    def _groups(self, P: np.ndarray, grow: float):
-        """(turbine index, indices of the points in its grown box) for each turbine with any."""
-        pp, tt = self._pairs(P, grow)
-        if len(tt) == 0:
-            return
-        cut = np.r_[0, np.flatnonzero(np.diff(tt)) + 1, len(tt)]
-        for a, b in zip(cut[:-1], cut[1:]):
-            yield int(tt[a]), pp[a:b]
+    def _kernel_grid(self) -> tuple:
+        """The site as ``safety_kernel`` reads it (built on the first query): boxes, grid, and
+        each turbine's ``Turbine._kernel_params`` stacked (blade frames padded to the most
+        blades, ``nb`` telling how many are real)."""
+        if self._grid_args is None:
+            params = [t._cached("kernel_params", t._kernel_params) for t in self.turbines]
+            nb = np.array([len(f) for _, _, f in params], np.int64)
+            frames = np.zeros((len(params), int(nb.max()) if len(nb) else 0, 3, 3))
+            for i, (_, _, f) in enumerate(params):
+                frames[i, :len(f)] = f
+            vec = np.array([v for v, _, _ in params], float) if params else np.zeros((0, 6, 3))
+            sc = np.array([c for _, c, _ in params], float) if params else np.zeros((0, 1))
+            self._grid_args = (self.lo, self.hi, self.part_lo, self.part_hi,
+                               np.asarray(self._origin, float), float(self._cell),
+                               np.asarray(self._shape, np.int64), self._start, self._members,
+                               vec, sc, frames, nb)
+        return self._grid_args
 
     def near(self, points: np.ndarray) -> list[np.ndarray]:
         """Per turbine, the indices of the points inside its grown bounding box."""
-        out = [np.zeros(0, np.int64) for _ in self.turbines]
-        for i, idx in self._groups(np.atleast_2d(np.asarray(points, float)), self.horizon):
-            out[i] = idx
-        return out
+        from wtcli.plan import safety_kernel
+
+        P = np.ascontiguousarray(np.atleast_2d(np.asarray(points, float)))
+        pp, tt = safety_kernel.near(P, *self._kernel_grid()[:9])
+        order = np.argsort(tt, kind="stable")
+        pp, tt = pp[order], tt[order]
+        return [pp[tt == i] for i in range(len(self.turbines))]
 
     def nearest_hub(self, point: np.ndarray) -> Turbine:
         """The turbine whose hub centre is nearest the point (the first such, as ``min`` would)."""
@@ -186,22 +156,19 @@ class Site:
     # ---- clearance ------------------------------------------------------------------------------
     def clearance(self, points: np.ndarray, cap: float | None = None) -> np.ndarray:
         """(M,) distance to the nearest part of any turbine (``Turbine.clearance``'s lower bound),
-        capped at the horizon, or with ``cap`` at the cull distance (module docstring).
+        capped at the horizon, or with ``cap`` at the cull distance (module docstring); NaN for
+        a point with a NaN coordinate (never "clear").
 
-        Speed: a part's exact distance is computed only for points whose cheap bound (distance
-        to a capsule or cylinder enclosing the part) is below ``cap`` (default: the horizon);
-        elsewhere the cheap bound, itself a lower bound of the true distance, stands in."""
-        P = np.atleast_2d(np.asarray(points, float))
+        Speed: the query runs compiled (``safety_kernel``), and a part's exact distance is
+        computed only for points whose cheap bound (distance to a capsule or cylinder enclosing
+        the part) is below ``cap`` (default: the horizon); elsewhere the cheap bound, itself a
+        lower bound of the true distance, stands in."""
+        from wtcli.plan import safety_kernel  # numba is imported on first use (Turbine.clearance)
+
+        P = np.ascontiguousarray(np.atleast_2d(np.asarray(points, float)))
         cap = self.horizon if cap is None else min(cap, self.horizon)
         grow = self.cull_distance(cap)
-        out = np.full(len(P), grow)
-        for i, idx in self._groups(P, grow):
-            out[idx] = np.minimum(out[idx], self._turbine_clearance(self.turbines[i], P[idx], cap))
-        out[np.isnan(P).any(axis=1)] = np.nan  # outside the grid, but never "clear"
-        return out
-
-    def _turbine_clearance(self, t: Turbine, P: np.ndarray, cap: float) -> np.ndarray:
-        return t.clearance(P, cap=cap)
+        return safety_kernel.clearance(P, grow, grow == self.horizon, cap, *self._kernel_grid())
 
     def nearest_part(self, point: np.ndarray) -> tuple[str, float]:
         """("T1 blade2", 2.3): the part of any turbine nearest a point, and its distance.
@@ -232,23 +199,18 @@ class Site:
         The same samples and bound as ``segment_lower_bound`` (at most ``step`` apart, minus half
         their spacing), but only the samples inside some turbine's grown box are evaluated: the
         others are at the cull distance, which every evaluated value is capped at anyway."""
-        p0 = np.atleast_2d(np.asarray(p0, float))
-        p1 = np.atleast_2d(np.asarray(p1, float))
+        from wtcli.plan import safety_kernel
+
+        p0 = np.ascontiguousarray(np.atleast_2d(np.asarray(p0, float)))
+        p1 = np.ascontiguousarray(np.atleast_2d(np.asarray(p1, float)))
         if len(p0) == 0:
             return np.zeros(0)
         cap = self.horizon if cap is None else min(cap, self.horizon)
         grow = self.cull_distance(cap)
         length = np.linalg.norm(p1 - p0, axis=1)
-        n = np.maximum(1, np.ceil(length / step).astype(int))
-        leg, j0, j1 = self._sample_ranges(p0, p1, n, grow)
-        out = np.full(len(p0), grow)
-        if len(leg):
-            count = j1 - j0 + 1
-            seg = np.repeat(leg, count)
-            j = np.repeat(j0, count) + np.arange(len(seg)) - np.repeat(np.cumsum(count) - count, count)
-            t = j / n[seg]  # the very sample points segment_lower_bound takes
-            pts = p0[seg] + (p1 - p0)[seg] * t[:, None]
-            np.minimum.at(out, seg, self.clearance(pts, cap))
+        n = np.maximum(1, np.ceil(length / step).astype(np.int64))
+        out = safety_kernel.segment_clearance(p0, p1, n, *self._slabs(grow), grow,
+                                              grow == self.horizon, cap, *self._kernel_grid())
         return out - 0.5 * length / n
 
     def lowest_sample(self, p0: np.ndarray, p1: np.ndarray, step: float = 0.5,
@@ -275,62 +237,24 @@ class Site:
                      cap: float | None) -> tuple[np.ndarray, np.ndarray]:
         """(t, clearance) of the samples of ``segment_clearance`` on one leg that lie near a
         turbine (the others are at the cull distance)."""
-        p0, p1 = np.asarray(p0, float)[None], np.asarray(p1, float)[None]
+        from wtcli.plan import safety_kernel
+
+        p0, p1 = np.asarray(p0, float).reshape(3), np.asarray(p1, float).reshape(3)
         cap = self.horizon if cap is None else min(cap, self.horizon)
-        n = np.maximum(1, np.ceil(np.linalg.norm(p1 - p0, axis=1) / step).astype(int))
-        _, j0, j1 = self._sample_ranges(p0, p1, n, self.cull_distance(cap))
+        n = max(1, math.ceil(float(np.linalg.norm((p1 - p0)[None], axis=1)[0]) / step))
+        j0, j1 = safety_kernel.stretches(*p0, *p1, n, *self._slabs(self.cull_distance(cap)))
         if len(j0) == 0:
             return np.zeros(0), np.zeros(0)
-        j = np.concatenate([np.arange(a, b + 1) for a, b in zip(j0, j1)])
-        t = j / n[0]
+        t = np.concatenate([np.arange(a, b + 1) for a, b in zip(j0, j1)]) / n
         return t, self.clearance(p0 + (p1 - p0) * t[:, None], cap)
 
-    def _sample_ranges(self, p0: np.ndarray, p1: np.ndarray, n: np.ndarray,
-                       grow: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(leg, first, last sample index) of the stretches of each leg inside a turbine's box
-        grown by ``grow``: a slab test against each box whose extent the leg's overlaps.
-
-        Conservative: the boxes get 1 cm more, the entry and exit a slack of 1e-3 of the leg and
-        one sample each side, far beyond the rounding of the slab times (an axis the leg hardly
-        moves along, < 1 um, is tested at its start); samples left out are outside every box
-        (with a cap: both part boxes of every turbine)."""
-        empty = np.zeros(0, np.int64)
-        if not self.turbines:
-            return empty, empty, empty
+    def _slabs(self, grow: float) -> tuple[np.ndarray, np.ndarray]:
+        """The boxes a leg is sampled in: with the horizon each turbine's box, with a cap both
+        part boxes of every turbine; grown by ``grow`` and 1 cm more (``safety_kernel.stretches``)."""
         if grow == self.horizon:
-            lo, hi = self.box_lo - (grow + 0.01), self.box_hi + (grow + 0.01)
-        else:
-            lo = self.part_lo.reshape(-1, 3) - (grow + 0.01)
-            hi = self.part_hi.reshape(-1, 3) + (grow + 0.01)
-        a, b = np.minimum(p0, p1), np.maximum(p0, p1)
-        ii, kk = np.nonzero(((a[:, None, :] <= hi[None]) & (b[:, None, :] >= lo[None])).all(axis=2))
-        if len(ii) == 0:
-            return empty, empty, empty
-        A, D, LO, HI = p0[ii], (p1 - p0)[ii], lo[kk], hi[kk]
-        flat = np.abs(D) < 1e-6
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ta, tb = (LO - A) / D, (HI - A) / D
-        within = (A >= LO) & (A <= HI)
-        t_in = np.where(flat, np.where(within, -np.inf, np.inf), np.minimum(ta, tb)).max(axis=1)
-        t_out = np.where(flat, np.where(within, np.inf, -np.inf), np.maximum(ta, tb)).min(axis=1)
-        t_in, t_out = np.maximum(t_in, 0.0) - 1e-3, np.minimum(t_out, 1.0) + 1e-3
-        hit = t_in <= t_out
-        ii, t_in, t_out = ii[hit], t_in[hit], t_out[hit]
-        if len(ii) == 0:
-            return empty, empty, empty
-        m = n[ii]
-        j0 = np.clip(np.floor(t_in * m).astype(np.int64) - 1, 0, m)
-        j1 = np.clip(np.ceil(t_out * m).astype(np.int64) + 1, 0, m)
-        # Merge the overlapping stretches of a leg (a turbine's two boxes, neighbours' boxes):
-        # keyed by leg, a stretch starts a new run where it begins after every earlier one ended.
-        span = int(n.max()) + 2
-        order = np.lexsort((j0, ii))
-        ii, j0, j1 = ii[order], j0[order] + ii[order] * span, j1[order] + ii[order] * span
-        ends = np.maximum.accumulate(j1)
-        new = np.r_[True, j0[1:] > ends[:-1] + 1]
-        first = np.flatnonzero(new)
-        last = np.maximum.reduceat(j1, first)
-        return ii[first], j0[first] - ii[first] * span, last - ii[first] * span
+            return self.box_lo - (grow + 0.01), self.box_hi + (grow + 0.01)
+        return (np.ascontiguousarray(self.part_lo.reshape(-1, 3) - (grow + 0.01)),
+                np.ascontiguousarray(self.part_hi.reshape(-1, 3) + (grow + 0.01)))
 
     def legs_above_ground(self, p0: np.ndarray, p1: np.ndarray, height: float) -> np.ndarray:
         """(K,) bool: each straight leg p0[i] -> p1[i] stays ``height`` above the ground model
