@@ -757,7 +757,8 @@ def test_site_ground_z_is_the_nearest_base_as_by_comparing_all(layout):
     lo, hi = site.ground_points[:, :2].min(axis=0) - 800, site.ground_points[:, :2].max(axis=0) + 800
     P = np.c_[rng.uniform(lo, hi, (4000, 2)), rng.uniform(0, 200, 4000)]
     P = np.r_[P, site.ground_points + [0, 0, 50], [[5000.0, -2000.0, 60.0], [-1e5, 3e4, 10.0]],
-              np.c_[np.round(P[:200, :2] / 50) * 50, P[:200, 2]]]  # on cell edges, far away
+              np.c_[np.round(P[:200, :2] / 50) * 50, P[:200, 2]],  # on cell edges, far away
+              [[np.nan, 0.0, 10.0], [0.0, np.inf, 10.0]]]  # what argmin makes of those: the first
     d = np.linalg.norm(P[:, None, :2] - site.ground_points[None, :, :2], axis=2)
     want = site.ground_points[np.argmin(d, axis=1), 2]
     assert np.array_equal(site.ground_z(P), want)

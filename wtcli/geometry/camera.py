@@ -172,13 +172,19 @@ def look_at_rotation(position: np.ndarray, target: np.ndarray, roll_deg: float =
     return _rotation_from_forward(fwd / n, roll_deg)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """np.cross of two 3-vectors, with its arithmetic (the same bits) at a tenth of its cost:
+    the planner makes a rotation for each of tens of thousands of photos."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
 def _rotation_from_forward(fwd: np.ndarray, roll_deg: float, heading_hint: float = 0.0) -> np.ndarray:
     fwd = fwd / np.linalg.norm(fwd)
-    right = np.cross(fwd, Z)
+    right = _cross(fwd, Z)
     if np.linalg.norm(right) < 1e-6:  # looking straight up or down: take right from the heading
         right = np.array([math.cos(heading_hint), -math.sin(heading_hint), 0.0])
     right /= np.linalg.norm(right)
-    down = np.cross(fwd, right)
+    down = _cross(fwd, right)
     r = math.radians(roll_deg)
     # Rolling the camera CCW (seen from behind) turns its right axis towards its up (= -down).
     right2 = math.cos(r) * right - math.sin(r) * down

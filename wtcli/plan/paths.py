@@ -27,6 +27,7 @@ every turbine; every leg ``required - step/2`` (the lower bound's sampling slack
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -473,24 +474,26 @@ def _join(wps: list[WP], q: np.ndarray, q_fwd: np.ndarray, turbine: Turbine, k: 
     A, _ = turbine.blade_semi_axes(np.array([1.0]))
     s_end = turbine.tip_radius
     s_arc = max(sp, sq) if abs(sp - sq) < 3 else None
-    cands = []
-    if s_arc is not None:
-        radius = max(rp, rq)
-        spans = [s_arc] + [x for x in np.arange(s_arc + 2.0, s_end + 0.1, 2.0)]
-        if s_arc > s_end - 2.0:  # at the tip: go round beyond it too
-            spans += [s_end + pp.required]
-        for long_way in (False, True):
-            for s in spans:
-                vias = []
-                if abs(s - sp) > 1e-6:
-                    vias.append(hc + s * d + (p - hc - sp * d))
-                vias += _arc(turbine, (d, c, n), s, gp, gq, radius if s <= s_end else rp, long_way)
-                if abs(s - sq) > 1e-6:
-                    vias.append(hc + s * d + (q - hc - sq * d))
-                cands.append(vias)
-    elif site.segment_clearance(p[None], q[None], LEG_STEP, pp.required)[0] >= pp.leg_required:
+    if s_arc is None and site.segment_clearance(p[None], q[None], LEG_STEP,
+                                                pp.required)[0] >= pp.leg_required:
         return
-    else:
+
+    def candidates():  # nearest the passes' end first; made only as far as they are checked
+        if s_arc is not None:
+            radius = max(rp, rq)
+            spans = [s_arc] + [x for x in np.arange(s_arc + 2.0, s_end + 0.1, 2.0)]
+            if s_arc > s_end - 2.0:  # at the tip: go round beyond it too
+                spans += [s_end + pp.required]
+            for long_way in (False, True):
+                for s in spans:
+                    vias = []
+                    if abs(s - sp) > 1e-6:
+                        vias.append(hc + s * d + (p - hc - sp * d))
+                    vias += _arc(turbine, (d, c, n), s, gp, gq, radius if s <= s_end else rp, long_way)
+                    if abs(s - sq) > 1e-6:
+                        vias.append(hc + s * d + (q - hc - sq * d))
+                    yield vias
+            return
         # Along the span (a pass whose middle stations were dropped, e.g. a trailing edge facing
         # the tower): round the blade at p's span to a free angle, along the blade there, and
         # back round at q's span; nearest angles first.
@@ -505,32 +508,32 @@ def _join(wps: list[WP], q: np.ndarray, q_fwd: np.ndarray, turbine: Turbine, k: 
             for r in (radius, radius + 2.0):
                 w = math.cos(g) * c + math.sin(g) * n
                 # Fine arc steps: p and q may keep barely the clearance, a chord would cut in.
-                cands.append(_arc(turbine, (d, c, n), sp, gp, g, rp, step_deg=10.0)
-                             + [hc + sp * d + r * w, hc + sq * d + r * w]
-                             + _arc(turbine, (d, c, n), sq, g, gq, rq, step_deg=10.0))
-    if cands:
-        # Candidates checked a few at a time; the first (nearest the passes' end) that clears wins.
-        for b0 in range(0, len(cands), 6):
-            batch = cands[b0:b0 + 6]
-            legs0, legs1, owner, pts, pown = [], [], [], [], []
-            for i, vias in enumerate(batch):
-                chain = [p] + vias + [q]
-                legs0 += chain[:-1]
-                legs1 += chain[1:]
-                owner += [i] * (len(chain) - 1)
-                pts += vias
-                pown += [i] * len(vias)
-            good = np.ones(len(batch), bool)
-            lb = site.segment_clearance(np.array(legs0), np.array(legs1), LEG_STEP, pp.required)
-            np.logical_and.at(good, np.array(owner), lb >= pp.leg_required)
-            if pts:
-                P = np.array(pts)
-                okp = (site.clearance(P, pp.required) >= pp.required) & \
-                    site.above_ground(P, pp.min_altitude)
-                np.logical_and.at(good, np.array(pown), okp)
-            if good.any():
-                wps += [WP(v, None, False, comp) for v in batch[int(np.argmax(good))]]
-                return
+                yield (_arc(turbine, (d, c, n), sp, gp, g, rp, step_deg=10.0)
+                       + [hc + sp * d + r * w, hc + sq * d + r * w]
+                       + _arc(turbine, (d, c, n), sq, g, gq, rq, step_deg=10.0))
+
+    # Candidates checked a few at a time; the first that clears wins.
+    cands = candidates()
+    while batch := list(itertools.islice(cands, 6)):
+        legs0, legs1, owner, pts, pown = [], [], [], [], []
+        for i, vias in enumerate(batch):
+            chain = [p] + vias + [q]
+            legs0 += chain[:-1]
+            legs1 += chain[1:]
+            owner += [i] * (len(chain) - 1)
+            pts += vias
+            pown += [i] * len(vias)
+        good = np.ones(len(batch), bool)
+        lb = site.segment_clearance(np.array(legs0), np.array(legs1), LEG_STEP, pp.required)
+        np.logical_and.at(good, np.array(owner), lb >= pp.leg_required)
+        if pts:
+            P = np.array(pts)
+            okp = (site.clearance(P, pp.required) >= pp.required) & \
+                site.above_ground(P, pp.min_altitude)
+            np.logical_and.at(good, np.array(pown), okp)
+        if good.any():
+            wps += [WP(v, None, False, comp) for v in batch[int(np.argmax(good))]]
+            return
     vias = connect(site, p, q, pp.leg_required, hints=[_unit(p - hc - sp * d)],
                    ground=pp.min_altitude)
     if vias is None:

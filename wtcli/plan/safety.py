@@ -326,41 +326,20 @@ class Site:
 
     def ground_index(self, points: np.ndarray) -> np.ndarray:
         """Index (into ``ground_points``) of the ground point nearest each point in x/y, the
-        first of equally near ones. The points with one index form a convex region."""
-        P = np.atleast_2d(points)
-        G = self.ground_points
-        if len(G) <= GROUND_BRUTE_FORCE or len(P) == 0:
-            return self._nearest_ground(P)
-        # The ground points in the 3 x 3 cells around each point's cell: where the nearest of
-        # them is within one cell size, no point further out can be nearer (nor as near).
-        f = np.floor((P[:, :2] - self._g_origin) / self._g_cell)
-        pts, gs = [], []
-        for dx in (-1, 0, 1):
-            for dy in (-1, 0, 1):
-                c = f + (dx, dy)
-                ok = ((c >= 0) & (c < self._g_shape)).all(axis=1)
-                pt = np.nonzero(ok)[0]
-                cell = c[pt, 0].astype(np.int64) * self._g_shape[1] + c[pt, 1].astype(np.int64)
-                first, count = self._g_start[cell], self._g_start[cell + 1] - self._g_start[cell]
-                pts.append(np.repeat(pt, count))
-                k = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
-                gs.append(self._g_members[np.repeat(first, count) + k])
-        pp, gg = np.concatenate(pts), np.concatenate(gs)
-        d = np.linalg.norm(P[pp, None, :2] - G[gg, None, :2], axis=2)[:, 0]  # as brute force
-        near = np.full(len(P), np.inf)
-        np.minimum.at(near, pp, d)
-        tie = d == near[pp]  # per point, the nearest candidates: the lowest index of them
-        best = np.full(len(P), len(G), np.int64)
-        np.minimum.at(best, pp[tie], gg[tie])
-        found = near < self._g_cell * (1 - 1e-9) - 1e-9  # rounding of the cell arithmetic
-        rest = np.nonzero(~found)[0]
-        if len(rest):
-            best[rest] = self._nearest_ground(P[rest])
-        return best
+        first of equally near ones. The points with one index form a convex region.
 
-    def _nearest_ground(self, P: np.ndarray) -> np.ndarray:
-        d = np.linalg.norm(P[:, None, :2] - self.ground_points[None, :, :2], axis=2)
-        return np.argmin(d, axis=1)
+        The ground points in the 3 x 3 cells around each point's cell are compared (compiled,
+        ``safety_kernel.ground_index``): where the nearest of them is within one cell size, no
+        point further out can be nearer (nor as near); elsewhere, and on small sites, all are."""
+        from wtcli.plan import safety_kernel
+
+        P = np.ascontiguousarray(np.atleast_2d(np.asarray(points, float)))
+        G = self.ground_points
+        if len(G) == 0:
+            return np.argmin(np.zeros((len(P), 0)), axis=1)  # numpy's own error
+        return safety_kernel.ground_index(P, G, np.asarray(self._g_origin, float), float(self._g_cell),
+                                          np.asarray(self._g_shape, np.int64), self._g_start,
+                                          self._g_members, len(G) <= GROUND_BRUTE_FORCE)
 
     def _build_ground_grid(self) -> None:
         """Cells of the ground points (CSR: ``_g_start``, ``_g_members``), as large as the

@@ -174,3 +174,43 @@ def segment_clearance(p0: np.ndarray, p1: np.ndarray, n: np.ndarray, slab_lo: np
                 best = min(best, c)
         out[i] = best
     return out
+
+
+@_jit
+def ground_index(P: np.ndarray, G: np.ndarray, origin: np.ndarray, cell: float,
+                 shape: np.ndarray, start: np.ndarray, members: np.ndarray,
+                 brute: bool) -> np.ndarray:
+    """``Site.ground_index``: per point, the index of the ground point nearest in x/y (the lowest
+    of equally near ones), from the 3 x 3 cells around the point's cell where the nearest found
+    there is within one cell size, else by comparing all (``brute``: always)."""
+    out = np.empty(P.shape[0], np.int64)
+    for i in range(P.shape[0]):
+        px, py = P[i, 0], P[i, 1]
+        best, near = G.shape[0], np.inf
+        if not brute:
+            fx = math.floor((px - origin[0]) / cell) if math.isfinite(px) else -2.0
+            fy = math.floor((py - origin[1]) / cell) if math.isfinite(py) else -2.0
+            for dx in (-1.0, 0.0, 1.0):
+                for dy in (-1.0, 0.0, 1.0):
+                    cx, cy = fx + dx, fy + dy
+                    if not (cx >= 0 and cy >= 0 and cx < shape[0] and cy < shape[1]):
+                        continue
+                    c = int(cx) * shape[1] + int(cy)
+                    for m in range(start[c], start[c + 1]):
+                        g = members[m]
+                        ex, ey = px - G[g, 0], py - G[g, 1]
+                        d = math.sqrt(ex * ex + ey * ey)
+                        if d < near or (d == near and g < best):
+                            best, near = g, d
+        if brute or not near < cell * (1 - 1e-9) - 1e-9:  # rounding of the cell arithmetic
+            best, near = 0, np.inf
+            for g in range(G.shape[0]):  # np.argmin's: the first least, or the first NaN
+                ex, ey = px - G[g, 0], py - G[g, 1]
+                d = math.sqrt(ex * ex + ey * ey)
+                if math.isnan(d):
+                    best = g
+                    break
+                if d < near:
+                    best, near = g, d
+        out[i] = best
+    return out
