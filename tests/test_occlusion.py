@@ -117,6 +117,46 @@ def test_line_of_sight_through_a_thin_blade_tip_is_blocked():
     assert t.line_of_sight(eyes, ends).tolist() == [False, True]
 
 
+@pytest.mark.parametrize("max_steps", [64, 3])
+def test_line_of_sight_is_the_sphere_trace_of_the_reference_model(max_steps):
+    """The compiled trace (clearance_kernel.trace) against the same sphere trace written out in
+    numpy on the reference model (clearance_by_part): rays past, through and along the
+    turbine, from the surface, with few steps so that the finishing samples are tried too."""
+    from wtcli.geometry.turbine import segment_lower_bound
+
+    rng = np.random.default_rng(max_steps)
+    t = make_turbine(az=float(rng.uniform(0, 120)), yaw=float(rng.uniform(0, 360)))
+    S = t.surface_samples(1.0)
+    k = rng.integers(0, len(S), 400)
+    targets = S.points[k]
+    eyes = np.r_[targets[:200] + S.normals[k[:200]] * rng.uniform(0.05, 20, (200, 1))
+                 + rng.normal(0, 3, (200, 3)),
+                 targets[200:] + rng.normal(0, 15, (200, 3))]
+    eyes[:20] = targets[:20] + 0.02 * S.normals[k[:20]]  # grazing: along the surface
+    got = t.line_of_sight(eyes, targets, max_steps=max_steps)
+
+    def dist(X):
+        return t.clearance_by_part(X, cap=1.0).min(axis=1)
+
+    ray = targets - eyes
+    stop = np.linalg.norm(ray, axis=1)
+    ray /= stop[:, None]
+    stop -= 0.05
+    want, live, tt = np.ones(len(eyes), bool), np.nonzero(stop > 0)[0], np.zeros(len(eyes))
+    for _ in range(max_steps):
+        c = dist(eyes[live] + tt[live, None] * ray[live])
+        want[live[c < 0.01]] = False
+        tt[live] += c
+        live = live[(c >= 0.01) & (tt[live] < stop[live])]
+    lb = segment_lower_bound(dist, eyes[live] + tt[live, None] * ray[live],
+                             eyes[live] + stop[live, None] * ray[live], 0.01)
+    want[live[lb < 0.005]] = False
+    assert 50 < want.sum() < 350  # both answers occur
+    if max_steps == 3:
+        assert len(live) > 20  # the finishing samples decide some
+    assert np.array_equal(got, want)
+
+
 def test_line_of_sight_checks_its_input():
     t = make_turbine()
     with pytest.raises(ValueError, match="same shape"):

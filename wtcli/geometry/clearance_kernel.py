@@ -141,3 +141,34 @@ def point_clearance(px: float, py: float, pz: float, vec: np.ndarray, sc: np.nda
     if d < min(best, cap):
         d = _tower(rho, tz, H, rb, rt)
     return min(best, d)
+
+
+@_jit
+def trace(eyes: np.ndarray, ray: np.ndarray, stop: np.ndarray, vec: np.ndarray, sc: np.ndarray,
+          frames: np.ndarray, hit: float, max_steps: int) -> tuple:
+    """``Turbine.line_of_sight``'s sphere tracing, ray by ray: (clear, t, live). From each point
+    the ray advances by ``clearance`` (capped at 1 m); blocked where it comes within ``hit``;
+    ``live`` where still undecided after ``max_steps`` (the caller finishes those)."""
+    n = eyes.shape[0]
+    clear = np.ones(n, np.bool_)
+    live = np.zeros(n, np.bool_)
+    t = np.zeros(n)
+    V, S, F = vec.reshape(1, 6, 3), sc.reshape(1, -1), frames.reshape(1, -1, 3, 3)
+    for i in range(n):
+        if not stop[i] > 0:
+            continue
+        live[i] = True
+        for _ in range(max_steps):
+            x = eyes[i, 0] + t[i] * ray[i, 0]
+            y = eyes[i, 1] + t[i] * ray[i, 1]
+            z = eyes[i, 2] + t[i] * ray[i, 2]
+            c = point_clearance(x, y, z, V, S, F, 0, frames.shape[0], 1.0)
+            t[i] += c
+            if c < hit:
+                clear[i] = False
+                live[i] = False
+                break
+            if not t[i] < stop[i]:
+                live[i] = False
+                break
+    return clear, t, live

@@ -345,22 +345,21 @@ class Turbine:
         stop = np.linalg.norm(ray, axis=1)
         ray /= np.maximum(stop, 1e-12)[:, None]
         stop -= end_gap
-        t = np.zeros(len(eyes))
-        clear = np.ones(len(eyes), dtype=bool)
-        live = np.nonzero(stop > 0)[0]
+        from wtcli.geometry import clearance_kernel
+
         # Any lower bound of the distance keeps the tracing exact; cheaper ones cost steps: the
-        # enclosing-shape bounds stand in beyond 1 m.
+        # enclosing-shape bounds stand in beyond 1 m (the cap).
+        vec, sc, frames = self._cached("kernel_params", self._kernel_params)
+        clear, t, undecided = clearance_kernel.trace(np.ascontiguousarray(eyes), ray,
+                                                     np.ascontiguousarray(stop), vec, sc, frames,
+                                                     float(hit), int(max_steps))
+        live = np.nonzero(undecided)[0]
+        if len(live) == 0:
+            return clear
+
         def dist(X: np.ndarray) -> np.ndarray:
             return self.clearance(X, cap=1.0)
 
-        for _ in range(max_steps):
-            if len(live) == 0:
-                return clear
-            c = dist(eyes[live] + t[live, None] * ray[live])
-            blocked = c < hit
-            clear[live[blocked]] = False
-            t[live] += c
-            live = live[~blocked & (t[live] < stop[live])]
         p0 = eyes[live] + t[live, None] * ray[live]
         p1 = eyes[live] + stop[live, None] * ray[live]
         lb = segment_lower_bound(dist, p0, p1, hit)
