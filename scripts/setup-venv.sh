@@ -12,5 +12,7 @@ want=$(cat requirements.lock pyproject.toml | sha256sum | cut -d' ' -f1)
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   .venv/bin/python -m pip install -q --disable-pip-version-check -r requirements.lock >&2
   .venv/bin/python -m pip install -q --disable-pip-version-check --no-deps -e . >&2
+  # Compile the planner's numba kernels now (10-20 s once), not in the user's first plan.
+  .venv/bin/python -m wtcli.warmup >&2
   echo "$want" > "$stamp"
 fi

@@ -286,6 +286,34 @@ def test_a_tower_wider_at_the_top_is_still_bounded_from_below():
     assert t.clearance_by_part(p[None], cap=1.0)[0, t.part_names().index("tower")] == 0.0
 
 
+def test_a_pickled_turbine_gives_the_kernels_the_same_types():
+    """The planner's workers get turbines by pickle. Their cached frame arrays must come back
+    read-only like the original's, or numba compiles a second version of every kernel in each
+    worker (seconds, on a machine's first plan): the cache is not pickled, but rebuilt."""
+    import pickle
+
+    t = Turbine.with_rotor_azimuth(10.0, id="T", base=(0.0, 0.0, 0.0), hub_height=80.0,
+                                   rotor_diameter=90.0, yaw_deg=0.0)
+    P = t.hub_center + np.array([[0.0, -5.0, 0.0], [0.0, 0.0, -70.0]])
+    want = t.clearance(P)
+    u = pickle.loads(pickle.dumps(t))
+    assert u == t and not u._cache
+    np.testing.assert_array_equal(u.clearance(P), want)
+    assert all(not a.flags.writeable for a in u._cache["kernel_params"])
+
+
+def test_warm_up_calls_every_kernel():
+    from wtcli.geometry import clearance_kernel, coverage_kernel
+    from wtcli.plan import safety_kernel
+    from wtcli.warmup import warm_up
+
+    assert warm_up() >= 0
+    for k in (clearance_kernel.clearance, clearance_kernel.trace, coverage_kernel.near_pairs,
+              safety_kernel.clearance, safety_kernel.near, safety_kernel.segment_clearance,
+              safety_kernel.stretches, safety_kernel.ground_index):
+        assert k.signatures, k
+
+
 def test_clearance_kernel_compiles_where_numba_cannot_cache(monkeypatch):
     """A read-only install without a writable cache folder: numba refuses cache=True at
     decoration; the kernel module then compiles without caching and gives the same values."""

@@ -52,8 +52,8 @@ def near_pairs(P: np.ndarray, N: np.ndarray, positions: np.ndarray, rotations: n
                     if c < 0 or c >= shape[2]:
                         continue
                     key = (a * shape[1] + b) * shape[2] + c
-                    lo = np.searchsorted(keys, key, "left")
-                    hi = np.searchsorted(keys, key, "right")
+                    lo = _first_at_least(keys, key)
+                    hi = _first_at_least(keys, key + 1)
                     if hi == lo:
                         continue
                     # The cube's bounding ball: too far, or wholly outside the frame's cone.
@@ -95,18 +95,34 @@ def near_pairs(P: np.ndarray, N: np.ndarray, positions: np.ndarray, rotations: n
                             out_d = _grow_float(out_d, cap)
                         out_s[n], out_p[n], out_d[n] = s, p, dist
                         n += 1
-    return out_s[:n].copy(), out_p[:n].copy(), out_d[:n].copy()
+    return _grow_int(out_s[:n], n), _grow_int(out_p[:n], n), _grow_float(out_d[:n], n)
 
 
-@_jit
+@_jit(inline=True)
+def _first_at_least(keys: np.ndarray, key: int) -> int:
+    """np.searchsorted(keys, key) on sorted integer keys (a plain bisection compiles in a
+    fraction of numba's generic one)."""
+    lo, hi = 0, keys.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if keys[mid] < key:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@_jit(inline=True)
 def _grow_int(a: np.ndarray, size: int) -> np.ndarray:
     b = np.empty(size, np.int64)
-    b[:a.shape[0]] = a
+    for i in range(a.shape[0]):  # element by element: slice assignment compiles 10x slower
+        b[i] = a[i]
     return b
 
 
-@_jit
+@_jit(inline=True)
 def _grow_float(a: np.ndarray, size: int) -> np.ndarray:
     b = np.empty(size)
-    b[:a.shape[0]] = a
+    for i in range(a.shape[0]):
+        b[i] = a[i]
     return b

@@ -124,6 +124,12 @@ class Turbine:
     def tip_radius(self) -> float:
         return self.rotor_diameter / 2.0
 
+    def __getstate__(self) -> dict:
+        # Pickled (to the planner's worker processes) without the cache: recomputed there, its
+        # arrays are read-only again, so the compiled kernels see the same types in every
+        # process (a writable copy would make numba compile a second version).
+        return {**self.__dict__, "_cache": {}}
+
     def _cached(self, key: Any, make: Any) -> Any:
         """The frame vectors, computed once per turbine (the planner asks for them hundreds of
         thousands of times). Arrays come back read-only: a caller that changed one in place

@@ -139,17 +139,23 @@ def stretches(ax: float, ay: float, az: float, bx: float, by: float, bz: float, 
         j0s[n] = min(max(math.floor(t_in * m) - 1, 0), m)
         j1s[n] = min(max(math.ceil(t_out * m) + 1, 0), m)
         n += 1
-    order = np.argsort(j0s[:n])
-    r0 = np.empty(n, np.int64)
-    r1 = np.empty(n, np.int64)
+    # By first sample (insertion sort: a leg meets a few boxes; np.argsort compiles slowly),
+    # then merged.
+    for i in range(1, n):
+        a, b = j0s[i], j1s[i]
+        k = i - 1
+        while k >= 0 and j0s[k] > a:
+            j0s[k + 1], j1s[k + 1] = j0s[k], j1s[k]
+            k -= 1
+        j0s[k + 1], j1s[k + 1] = a, b
     runs = 0
-    for i in order:
-        if runs and j0s[i] <= r1[runs - 1] + 1:
-            r1[runs - 1] = max(r1[runs - 1], j1s[i])
+    for i in range(n):
+        if runs and j0s[i] <= j1s[runs - 1] + 1:
+            j1s[runs - 1] = max(j1s[runs - 1], j1s[i])
         else:
-            r0[runs], r1[runs] = j0s[i], j1s[i]
+            j0s[runs], j1s[runs] = j0s[i], j1s[i]
             runs += 1
-    return r0[:runs], r1[:runs]
+    return j0s[:runs], j1s[:runs]
 
 
 @_jit
