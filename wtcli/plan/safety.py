@@ -166,7 +166,7 @@ class Site:
         from wtcli.plan import safety_kernel  # numba is imported on first use (Turbine.clearance)
 
         P = np.ascontiguousarray(np.atleast_2d(np.asarray(points, float)))
-        cap = self.horizon if cap is None else min(cap, self.horizon)
+        cap = self.horizon if cap is None else min(float(cap), self.horizon)
         grow = self.cull_distance(cap)
         return safety_kernel.clearance(P, grow, grow == self.horizon, cap, *self._kernel_grid())
 
@@ -205,7 +205,7 @@ class Site:
         p1 = np.ascontiguousarray(np.atleast_2d(np.asarray(p1, float)))
         if len(p0) == 0:
             return np.zeros(0)
-        cap = self.horizon if cap is None else min(cap, self.horizon)
+        cap = self.horizon if cap is None else min(float(cap), self.horizon)
         grow = self.cull_distance(cap)
         length = np.linalg.norm(p1 - p0, axis=1)
         n = np.maximum(1, np.ceil(length / step).astype(np.int64))
@@ -240,7 +240,7 @@ class Site:
         from wtcli.plan import safety_kernel
 
         p0, p1 = np.asarray(p0, float).reshape(3), np.asarray(p1, float).reshape(3)
-        cap = self.horizon if cap is None else min(cap, self.horizon)
+        cap = self.horizon if cap is None else min(float(cap), self.horizon)
         n = max(1, math.ceil(float(np.linalg.norm((p1 - p0)[None], axis=1)[0]) / step))
         j0, j1 = safety_kernel.stretches(*p0, *p1, n, *self._slabs(self.cull_distance(cap)))
         if len(j0) == 0:
