@@ -1015,3 +1015,23 @@ def test_site_clearance_of_a_nan_point_is_nan():
     got = site.clearance(np.array([[np.nan, 0.0, 80.0], [0.0, 0.0, 500.0]]))
     assert np.isnan(got[0]) and got[1] == site.horizon
     assert np.isnan(Site([]).clearance(np.array([[0.0, np.nan, 1.0]]))).all()
+
+
+def test_site_queries_far_outside_the_grid():
+    """Points and legs far beyond every turbine (infinite, or beyond an integer's range in grid
+    cells) read the horizon, as any point outside the grid; their ground is the first base's
+    (np.argmin's answer), and a photo taken there sees nothing."""
+    from wtcli.geometry.coverage import measure_coverage
+    from wtcli.plan.safety import Site
+
+    ts = [make_turbine(tid=f"T{i}", base=(300.0 * i, 0.0, float(i))) for i in range(20)]
+    site = Site(ts)
+    far = np.array([[1e300, 0.0, 80.0], [-1e300, 5.0, 80.0], [np.inf, 0.0, 80.0], [0.0, -np.inf, 80.0]])
+    assert (site.clearance(far) == site.horizon).all()
+    assert (site.clearance(far, 5.0) == site.cull_distance(5.0)).all()
+    legs = site.segment_clearance(far[:2], far[:2] + 1.0, 0.5, 5.0)  # finite legs only
+    assert (legs >= site.cull_distance(5.0) - 0.5).all()
+    assert (site.ground_z(far) == ts[0].base[2]).all()
+    s = ts[0].surface_samples(2.0)
+    cov = measure_coverage(s, CAM, far, np.repeat(np.eye(3)[None], len(far), 0), 2.0)
+    assert not cov.covered.any()

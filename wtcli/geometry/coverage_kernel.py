@@ -39,9 +39,9 @@ def near_pairs(P: np.ndarray, N: np.ndarray, positions: np.ndarray, rotations: n
         if not (math.isfinite(ox) and math.isfinite(oy) and math.isfinite(oz)):
             continue  # no cube is near such a photo (numpy: clipped outside the grid)
         top = float(max(shape[0], shape[1], shape[2]) + reach)  # far photos: no cube near either
-        c0 = int(min(max(math.floor((ox - origin[0]) / cell), -reach - 1.0), top))
-        c1 = int(min(max(math.floor((oy - origin[1]) / cell), -reach - 1.0), top))
-        c2 = int(min(max(math.floor((oz - origin[2]) / cell), -reach - 1.0), top))
+        c0 = int(min(max(np.floor((ox - origin[0]) / cell), -reach - 1.0), top))
+        c1 = int(min(max(np.floor((oy - origin[1]) / cell), -reach - 1.0), top))
+        c2 = int(min(max(np.floor((oz - origin[2]) / cell), -reach - 1.0), top))
         for a in range(c0 - reach, c0 + reach + 1):
             if a < 0 or a >= shape[0]:
                 continue

@@ -7,8 +7,8 @@ sample generation) around the compiled turbine distance. The rules are ``safety`
 docstring's, unchanged: the same culling boxes, the same leg samples, the same values;
 tests/test_plan.py checks them against every turbine and every sample.
 
-``grid`` bundles the site as the kernels read it (``Site._kernel_grid``): box corners, the cell
-grid and the stacked turbine parameters of ``Turbine._kernel_params``.
+The kernels take the site as ``Site._kernel_grid`` lays it out: box corners, the cell grid and
+the stacked turbine parameters of ``Turbine._kernel_params``.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ from wtcli.geometry.clearance_kernel import _jit, point_clearance
 @_jit(inline=True)
 def _cell(px: float, py: float, origin: np.ndarray, cell: float, shape: np.ndarray) -> int:
     """The grid cell of a point, or -1 outside the grid (or NaN)."""
-    fx = math.floor((px - origin[0]) / cell)
-    fy = math.floor((py - origin[1]) / cell)
+    fx = np.floor((px - origin[0]) / cell)  # a float: math.floor's integer overflows far out
+    fy = np.floor((py - origin[1]) / cell)
     if not (fx >= 0 and fy >= 0 and fx < shape[0] and fy < shape[1]):
         return -1
     return int(fx) * shape[1] + int(fy)
@@ -194,8 +194,8 @@ def ground_index(P: np.ndarray, G: np.ndarray, origin: np.ndarray, cell: float,
         px, py = P[i, 0], P[i, 1]
         best, near = G.shape[0], np.inf
         if not brute:
-            fx = math.floor((px - origin[0]) / cell) if math.isfinite(px) else -2.0
-            fy = math.floor((py - origin[1]) / cell) if math.isfinite(py) else -2.0
+            fx = np.floor((px - origin[0]) / cell) if math.isfinite(px) else -2.0
+            fy = np.floor((py - origin[1]) / cell) if math.isfinite(py) else -2.0
             for dx in (-1.0, 0.0, 1.0):
                 for dy in (-1.0, 0.0, 1.0):
                     cx, cy = fx + dx, fy + dy
