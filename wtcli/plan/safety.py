@@ -122,9 +122,9 @@ class Site:
         return min(self.horizon, cap / self._taper_min + 0.01)
 
     def _kernel_grid(self) -> tuple:
-        """The site as ``safety_kernel`` reads it (built on the first query): boxes, grid, and
-        each turbine's ``Turbine._kernel_params`` stacked (blade frames padded to the most
-        blades, ``nb`` telling how many are real)."""
+        """The site as ``safety_kernel`` reads it: the boxes and their grid
+        (``_kernel_boxes``), then each turbine's ``Turbine._kernel_params`` stacked (blade frames
+        padded to the most blades, ``nb`` telling how many are real); built on the first query."""
         if self._grid_args is None:
             params = [t._cached("kernel_params", t._kernel_params) for t in self.turbines]
             nb = np.array([len(f) for _, _, f in params], np.int64)
@@ -133,18 +133,21 @@ class Site:
                 frames[i, :len(f)] = f
             vec = np.array([v for v, _, _ in params], float) if params else np.zeros((0, 6, 3))
             sc = np.array([c for _, c, _ in params], float) if params else np.zeros((0, 1))
-            self._grid_args = (self.lo, self.hi, self.part_lo, self.part_hi,
-                               np.asarray(self._origin, float), float(self._cell),
-                               np.asarray(self._shape, np.int64), self._start, self._members,
-                               vec, sc, frames, nb)
+            self._grid_args = self._kernel_boxes() + (vec, sc, frames, nb)
         return self._grid_args
+
+    def _kernel_boxes(self) -> tuple:
+        """Box corners (grown by the horizon; part boxes), the grid's origin, cell size and
+        shape, and its CSR lists (``_start``, ``_members``), as the kernels take them."""
+        return (self.lo, self.hi, self.part_lo, self.part_hi, np.asarray(self._origin, float),
+                float(self._cell), np.asarray(self._shape, np.int64), self._start, self._members)
 
     def near(self, points: np.ndarray) -> list[np.ndarray]:
         """Per turbine, the indices of the points inside its grown bounding box."""
         from wtcli.plan import safety_kernel
 
         P = np.ascontiguousarray(np.atleast_2d(np.asarray(points, float)))
-        pp, tt = safety_kernel.near(P, *self._kernel_grid()[:9])
+        pp, tt = safety_kernel.near(P, *self._kernel_boxes())
         order = np.argsort(tt, kind="stable")
         pp, tt = pp[order], tt[order]
         return [pp[tt == i] for i in range(len(self.turbines))]
