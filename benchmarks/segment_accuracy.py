@@ -6,7 +6,9 @@
    in training (training uses 1_000_000 + i) — with every other image a front view and the rest
    drawn from the renderer's mix (oblique, side, rear; ground, sea, skies). Reported:
    * mask IoU per class: IoU of the class's union mask (score >= 0.5) with the truth's, per
-     image where either has the class, averaged;
+     image where either has the class, averaged; against the renderer's default "outline"
+     labels, and in ``half_labels`` against the half-coverage labels used until 2026-12
+     (docs/synth.md);
    * AP50 per class (instances matched greedily by score at mask IoU >= 0.5);
    * front views: share where segment -> contours -> pitch finds exactly the true number of
      visible blades of the main turbine (``truth["blades_visible"]``), as the CLI does it:
@@ -114,6 +116,9 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
     from wtcli.synth.render import render_sample
 
     ev = Evaluator(0.5)
+    # The same predictions scored against the half-coverage labels of sessions 1-18 too
+    # (docs/synth.md, label convention), so figures stay comparable across the change.
+    ev_half, zev_half = Evaluator(0.5), Evaluator(0.5)
     zoom = {"ev": Evaluator(0.5), "right": 0, "errs": [], "by_fill": {"distant": [0, 0], "working": [0, 0]}}
     views: dict[str, int] = {}
     grounds: dict[str, int] = {}
@@ -138,6 +143,10 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
         # What segment_image gives (small turbines looked at again), from the candidate floor up.
         zpred = second_look(model, s.image, pred[pred.scores >= CANDIDATE_FLOOR], CANDIDATE_FLOOR)
         zoom["ev"].add(zpred, s.instances)
+        half = render_sample(seed_base + i, width=width, height=height,
+                             view="front" if i % 2 == 0 else None, labels="half").instances
+        ev_half.add(pred, half)
+        zev_half.add(zpred, half)
         if s.truth["view"] == "front":
             front_n += 1
             conf = pred[pred.scores >= 0.5] if len(pred) else pred
@@ -179,6 +188,8 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
         "front_wrong_blade_count": wrong,
     })
     out.update({
+        "labels": "outline",
+        "half_labels": {"first_pass": ev_half.summary(), "zoom": zev_half.summary()},
         "zoom": zs,
         "n": done, "n_asked": n, "width": width, "height": height,
         "seeds": [seed_base, seed_base + done - 1],

@@ -132,6 +132,32 @@ def test_masks_do_not_overlap_and_sit_where_the_image_changes():
     assert len(s.instances) >= 3
 
 
+def test_outline_labels_widen_the_half_labels_by_the_blur_and_keep_the_photo():
+    widening = {}
+    for seed in range(8):
+        o, h = (render_sample(seed, 320, 240, view="front", labels=lab) for lab in ("outline", "half"))
+        assert o.image.tobytes() == h.image.tobytes()
+        assert (o.truth["labels"], h.truth["labels"]) == ("outline", "half")
+        assert o.instances.masks.sum(0).max() <= 1
+        ou, hu = o.instances.masks.any(0), h.instances.masks.any(0)
+        assert not (hu & ~ou).any()  # every half-covered pixel is outlined too
+        ob, hb = (s.instances.of("blade").union() for s in (o, h))
+        assert ob.sum() > hb.sum()
+        blur = o.truth["camera_effects"].get("blur")
+        widening[blur["kind"] if blur else "sharp"] = widening.get(blur["kind"] if blur else "sharp", []) + \
+            [(ob.sum() - hb.sum()) / max(_edge_length(hb), 1)]
+    # Sharp photos: the partly covered pixels, under a pixel per edge pixel; a blurred photo's
+    # outline reaches further.
+    assert 0.1 < np.mean(widening["sharp"]) < 1.0
+    blurred = widening.get("defocus", []) + widening.get("motion", [])
+    assert blurred and np.mean(blurred) > np.mean(widening["sharp"])
+
+
+def _edge_length(mask):
+    inner = mask[1:-1, 1:-1] & mask[:-2, 1:-1] & mask[2:, 1:-1] & mask[1:-1, :-2] & mask[1:-1, 2:]
+    return int(mask[1:-1, 1:-1].sum() - inner.sum())
+
+
 def test_dataset_files_round_trip(tmp_path):
     summary = render_dataset(tmp_path / "ds", 3, seed=4, width=160, height=120, progress=False)
     assert summary["images"] == 3
@@ -139,6 +165,7 @@ def test_dataset_files_round_trip(tmp_path):
     assert [img["file_name"] for img, _ in rows] == [f"images/{i:05d}.jpg" for i in range(3)]
     gt = json.loads((tmp_path / "ds" / "ground_truth.json").read_text())
     assert gt["schema"] == "wtinspect.synth_truth" and gt["schema_version"] == 1
+    assert gt["params"]["labels"] == "outline"
     for i, (img, inst) in enumerate(rows):
         again = render_sample(sample_seed(4, i), 160, 120)
         assert np.array_equal(inst.masks, again.instances.masks)
@@ -171,6 +198,7 @@ def test_cli_same_seed_same_files(cli, tmp_path):
     (["--seed", "-3"], ExitCode.CONFIG, "--seed"),
     (["--width", "5"], ExitCode.CONFIG, "--width"),
     (["--view", "top"], ExitCode.CONFIG, "--view"),
+    (["--labels", "wide"], ExitCode.CONFIG, "--labels"),
 ])
 def test_cli_bad_options(cli, tmp_path, args, code, words):
     r = cli("synth", tmp_path / "o", *args)

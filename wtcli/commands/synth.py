@@ -21,6 +21,10 @@ def synth(
     height: int = typer.Option(480, "--height", help="Image height in pixels (32..8192)."),
     view: str = typer.Option("mixed", "--view",
                              help="front | oblique | side | rear | mixed (draw one per image)."),
+    labels: str = typer.Option("outline", "--labels",
+                               help="Label convention: outline (every pixel a part visibly tints, "
+                                    "as photos are annotated) | half (a part covering half of the "
+                                    "pixel, before blur: the labels of versions before 2026-12)."),
     json_out: bool = typer.Option(False, "--json", help="Print a JSON summary on stdout."),
 ) -> None:
     """Render turbines through the camera model: images + COCO masks + ground truth."""
@@ -36,10 +40,13 @@ def synth(
             raise ConfigError(f"{name}: expected an integer in 32..8192, got {v}")
     if view not in VIEW_CHOICES:
         raise ConfigError(f"--view: expected one of {', '.join(VIEW_CHOICES)}, got {view!r}")
+    if labels not in ("outline", "half"):
+        raise ConfigError(f"--labels: expected outline or half, got {labels!r}")
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: exists and is not a folder; choose another output folder")
     summary = render_dataset(out, count, seed, width, height,
-                             view=None if view == "mixed" else view, progress=not json_out)
+                             view=None if view == "mixed" else view, progress=not json_out,
+                             labels=labels)
     if json_out:
         typer.echo(dumps(document("wtinspect.synth_summary", 1, summary)))
     else:

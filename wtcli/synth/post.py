@@ -1,5 +1,6 @@
 """What the drone's camera does to the picture: exposure and gamma, white balance, vignetting,
-defocus or motion blur, sensor noise, and JPEG re-encoding. Pixel-only: masks are untouched."""
+defocus or motion blur, sensor noise, and JPEG re-encoding. Pixel-only: the renderer applies
+the same blur to the parts' coverage for the labels (``apply_blur``)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,23 @@ from typing import Any
 
 import cv2
 import numpy as np
+
+
+def apply_blur(img: np.ndarray, blur: dict[str, Any] | None) -> np.ndarray:
+    """The blur ``camera_effects`` drew (its ``fx["blur"]``, or None for none) applied to a float
+    image or map; the renderer blurs the parts' coverage with it too (labels, render.py)."""
+    if not blur:
+        return img
+    if blur["kind"] == "defocus":
+        return cv2.GaussianBlur(img, (0, 0), blur["sigma_px"])
+    n, ang = blur["length_px"], blur["angle_deg"]
+    k = np.zeros((n, n), np.float32)
+    c = (n - 1) / 2
+    dxy = np.array([math.cos(math.radians(ang)), math.sin(math.radians(ang))]) * c
+    cv2.line(k, (int(round(c - dxy[0])), int(round(c - dxy[1]))),
+             (int(round(c + dxy[0])), int(round(c + dxy[1]))), 1.0, 1)
+    k /= max(k.sum(), 1e-6)
+    return cv2.filter2D(img, -1, k)
 
 
 def camera_effects(img: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, dict[str, Any]]:
@@ -47,20 +65,11 @@ def camera_effects(img: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarra
         fx["vignette"] = k
     u = rng.random()
     if u < 0.3:
-        s = float(rng.uniform(0.4, 1.4)) * W / 640
-        img = cv2.GaussianBlur(img, (0, 0), s)
-        fx["blur"] = {"kind": "defocus", "sigma_px": s}
+        fx["blur"] = {"kind": "defocus", "sigma_px": float(rng.uniform(0.4, 1.4)) * W / 640}
     elif u < 0.42:
-        n = int(rng.integers(3, 10))
-        ang = float(rng.uniform(0, 180))
-        k = np.zeros((n, n), np.float32)
-        c = (n - 1) / 2
-        dxy = np.array([math.cos(math.radians(ang)), math.sin(math.radians(ang))]) * c
-        cv2.line(k, (int(round(c - dxy[0])), int(round(c - dxy[1]))),
-                 (int(round(c + dxy[0])), int(round(c + dxy[1]))), 1.0, 1)
-        k /= max(k.sum(), 1e-6)
-        img = cv2.filter2D(img, -1, k)
-        fx["blur"] = {"kind": "motion", "length_px": n, "angle_deg": ang}
+        fx["blur"] = {"kind": "motion", "length_px": int(rng.integers(3, 10)),
+                      "angle_deg": float(rng.uniform(0, 180))}
+    img = apply_blur(img, fx.get("blur"))
     sigma = float(rng.uniform(0.0, 0.012))
     if sigma > 0.002:
         noise = rng.standard_normal((H, W, 1), dtype=np.float32) * np.float32(sigma)
