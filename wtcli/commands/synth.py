@@ -29,7 +29,7 @@ def synth(
 ) -> None:
     """Render turbines through the camera model: images + COCO masks + ground truth."""
     from wtcli.jsonio import document, dumps
-    from wtcli.synth.render import render_dataset
+    from wtcli.synth.render import LABELS, render_dataset
 
     if count < 1:
         raise ConfigError(f"--count: expected an integer >= 1, got {count}")
@@ -40,8 +40,8 @@ def synth(
             raise ConfigError(f"{name}: expected an integer in 32..8192, got {v}")
     if view not in VIEW_CHOICES:
         raise ConfigError(f"--view: expected one of {', '.join(VIEW_CHOICES)}, got {view!r}")
-    if labels not in ("outline", "half"):
-        raise ConfigError(f"--labels: expected outline or half, got {labels!r}")
+    if labels not in LABELS:
+        raise ConfigError(f"--labels: expected one of {', '.join(LABELS)}, got {labels!r}")
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: exists and is not a folder; choose another output folder")
     summary = render_dataset(out, count, seed, width, height,

@@ -85,7 +85,7 @@ def _check_args(seed: int, width: int, height: int, view: str | None) -> None:
 def render_sample(seed: int, width: int = 640, height: int = 480,
                   view: str | None = None, stops: float = 0.0,
                   labels: str = "outline") -> SynthSample:
-    """One synthetic photo; a pure function of (seed, width, height, view, stops).
+    """One synthetic photo; a pure function of (seed, width, height, view, stops, labels).
 
     ``view``: "front", "oblique", "side", "rear", or None to draw one (VIEW_ODDS).
     ``stops``: the chance that the rotor stands where crews stop it for an inspection, a "Y"
