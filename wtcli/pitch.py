@@ -223,7 +223,8 @@ def common_end(axes: list[Axis]) -> np.ndarray:
 
 def wider_end(inst: InstanceContours, ax: Axis, decisive: bool = False) -> np.ndarray | None:
     """One blade alone: the end whose last quarter holds more pixels (root wider than tip).
-    With ``decisive``, None unless one quarter holds at least 15 % more than the other."""
+    With ``decisive``, None unless one quarter holds at least 15 % more than the other and is
+    at least a pixel wider on average (a thin blade's ends differ by pixel noise alone)."""
     region = inst.fill()
     x0, y0, _, _ = inst.bbox
     ys, xs = np.nonzero(region)
@@ -232,7 +233,8 @@ def wider_end(inst: InstanceContours, ax: Axis, decisive: bool = False) -> np.nd
     q = 0.25 * (ax.t_max - ax.t_min)
     n_low = int((t < ax.t_min + q).sum())
     n_high = int((t > ax.t_max - q).sum())
-    if decisive and max(n_low, n_high) < 1.15 * min(n_low, n_high):
+    if decisive and (max(n_low, n_high) < 1.15 * min(n_low, n_high)
+                     or abs(n_high - n_low) < max(q, 1.0)):
         return None
     return ax.point(ax.t_min if n_low >= n_high else ax.t_max)
 
