@@ -144,8 +144,8 @@ def test_outline_labels_widen_the_half_labels_by_the_blur_and_keep_the_photo():
         ob, hb = (s.instances.of("blade").union() for s in (o, h))
         assert ob.sum() > hb.sum()
         blur = o.truth["camera_effects"].get("blur")
-        widening[blur["kind"] if blur else "sharp"] = widening.get(blur["kind"] if blur else "sharp", []) + \
-            [(ob.sum() - hb.sum()) / max(_edge_length(hb), 1)]
+        widening.setdefault(blur["kind"] if blur else "sharp", []).append(
+            (ob.sum() - hb.sum()) / max(_edge_length(hb), 1))
     # Sharp photos: the partly covered pixels, under a pixel per edge pixel; a blurred photo's
     # outline reaches further.
     assert 0.1 < np.mean(widening["sharp"]) < 1.0
