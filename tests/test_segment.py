@@ -75,6 +75,57 @@ def test_weights_round_trip_fp16(random_weights, tmp_path):
     assert (tmp_path / "again.pt").stat().st_size < 25e6
 
 
+
+def test_fine_level_pools_what_the_stride_8_level_pools():
+    """The stride-4 level starts as the stride-8 one upsampled: RoIAlign on it at twice the
+    scale samples exactly the same values (so weights from before it load unchanged)."""
+    from torchvision.ops import roi_align
+    from wtcli.segment.model import _upsample2
+
+    torch.manual_seed(0)
+    x = torch.rand(1, 3, 12, 16)
+    # (boxes at least a coarse cell wide: RoIAlign widens narrower ones to one cell of its level)
+    boxes = torch.tensor([[8.0, 8.0, 100.0, 60.0], [30.5, 17.25, 39.0, 80.0], [0.0, 0.0, 120.0, 88.0]])
+    coarse = roi_align(x, [boxes], 14, 1 / 8, 2, aligned=False)
+    fine = roi_align(_upsample2(x), [boxes], 14, 1 / 4, 2, aligned=False)
+    assert torch.allclose(coarse, fine, atol=1e-5)
+    # torchvision's own bilinear upsampling would put it a quarter of a coarse cell off
+    shifted = torch.nn.functional.interpolate(x, scale_factor=2, mode="bilinear", align_corners=False)
+    assert not torch.allclose(coarse, roi_align(shifted, [boxes], 14, 1 / 4, 2, aligned=False), atol=1e-3)
+
+
+def test_weights_from_before_the_fine_level_load_as_trained(random_weights, tmp_path):
+    from wtcli.segment.model import ARCH_BEFORE_P2, _upsample2
+
+    blob = torch.load(random_weights, weights_only=True)
+    old = {k: v for k, v in blob["state_dict"].items() if not k.startswith("backbone.fine.")}
+    torch.save({"arch": ARCH_BEFORE_P2, "state_dict": old, "meta": {}}, tmp_path / "old.pt")
+    m = build_model().eval()
+    torch.nn.init.normal_(m.backbone.fine[2].weight)  # whatever it held, the load zeroes it
+    load_weights(m, tmp_path / "old.pt")
+    assert not m.backbone.fine[2].weight.any()
+    with torch.inference_mode():
+        f = m.backbone(torch.rand(1, 3, 64, 96))
+    assert torch.equal(f["p2"], _upsample2(f["0"]))
+    del old["roi_heads.mask_predictor.mask_fcn_logits.bias"]  # anything else missing: refused
+    torch.save({"arch": ARCH_BEFORE_P2, "state_dict": old, "meta": {}}, tmp_path / "old.pt")
+    with pytest.raises(ModelError, match="do not fit"):
+        load_weights(build_model(), tmp_path / "old.pt")
+
+
+def test_rpn_does_not_see_the_fine_level():
+    from torchvision.models.detection.image_list import ImageList
+
+    m = build_model().eval()
+    x = torch.rand(1, 3, 64, 96)
+    with torch.inference_mode():
+        f = m.backbone(x)
+        images = ImageList(x, [(64, 96)])
+        a = m.rpn(images, f)[0][0]
+        f["p2"] = torch.rand_like(f["p2"]) * 100
+        b = m.rpn(images, f)[0][0]
+    assert torch.equal(a, b)
+
 def test_missing_weights_is_model_error(tmp_path):
     p = tmp_path / "nope.pt"
     with pytest.raises(ModelError, match="nope.pt"):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from wtcli.errors import ConfigError, ExitCode, InputError
+from wtcli.errors import ConfigError, ExitCode, InputError, ModelError
 from wtcli.masks import Instances, write_instances
 from wtcli.segment import data as D
 from wtcli.segment.model import build_model, load_weights
@@ -63,6 +63,14 @@ def test_resume_without_checkpoint_is_input_error(tmp_path):
     with pytest.raises(InputError, match="last.ckpt"):
         train(_tiny(tmp_path, resume=True))
 
+
+
+def test_resume_of_another_architecture_is_model_error(tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    torch.save({"arch": "wtseg-r18s-fpn128", "state_dict": {}, "iteration": 5}, run / "last.ckpt")
+    with pytest.raises(ModelError, match="architecture 'wtseg-r18s-fpn128'.*--init"):
+        train(_tiny(tmp_path, resume=True))
 
 @pytest.mark.parametrize("kw", [{"iterations": 0}, {"lr": -1.0}, {"width": 8}, {"batch_size": 0},
                                 {"train_sizes": ()}, {"train_sizes": (480, 10)},

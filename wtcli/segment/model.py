@@ -7,7 +7,8 @@ and check the output contract.
 
 Architecture (chosen by measuring on 2 CPU cores, see models/README.md): a ResNet-18 trunk
 whose last stage is slimmed to 256 channels, a 128-channel FPN on strides 8/16/32 (+ pooled 64),
-a box head of two 256-unit layers, and a mask head of two 128-channel convs. Plain
+a box head of two 256-unit layers, and a mask head of two 128-channel convs that pools the
+boxes of the stride-8 level from a fine stride-4 level instead (``_Backbone``). Plain
 BatchNorm in the trunk (trained from scratch, two images a batch). About 8 M parameters; the
 shipped file stores them as float16 (cast back to float32 on load).
 """
@@ -22,19 +23,23 @@ from torch import nn
 from torchvision.models import resnet18
 from torchvision.models.detection import MaskRCNN
 from torchvision.models.detection.anchor_utils import AnchorGenerator
-from torchvision.models.detection.backbone_utils import BackboneWithFPN
+from torchvision.models._utils import IntermediateLayerGetter
 from torchvision.models.detection.faster_rcnn import FastRCNNPredictor, TwoMLPHead
 from torchvision.models.detection.mask_rcnn import MaskRCNNHeads, MaskRCNNPredictor
-from torchvision.models.detection.rpn import RPNHead
+from torchvision.models.detection.rpn import RegionProposalNetwork, RPNHead
 from torchvision.models.detection.transform import GeneralizedRCNNTransform
 from torchvision.models.resnet import BasicBlock
 from torchvision.ops import MultiScaleRoIAlign
-from torchvision.ops.feature_pyramid_network import LastLevelMaxPool
+from torchvision.ops.feature_pyramid_network import FeaturePyramidNetwork, LastLevelMaxPool
+from torchvision.ops.poolers import _multiscale_roi_align, _setup_scales
 
 from wtcli.errors import ModelError
 from wtcli.masks import LABELS
 
-ARCH = "wtseg-r18s-fpn128"
+ARCH = "wtseg-r18s-fpn128-p2"
+# Files of the architecture before the fine level: they load with that level's branch at zero,
+# which is exactly the network they were trained as (see _Backbone).
+ARCH_BEFORE_P2 = "wtseg-r18s-fpn128"
 NUM_CLASSES = len(LABELS) + 1  # + background; class ids 1..3 follow wtcli.masks.LABELS
 MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
 DEFAULT_WEIGHTS = "wtseg-r18s.pt"
@@ -61,6 +66,69 @@ def _trunk() -> nn.Module:
     return r
 
 
+def _upsample2(x: torch.Tensor) -> torch.Tensor:
+    """x at twice the resolution, cell j of the result at cell j / 2 of ``x`` (linear between,
+    the last row and column repeated). That is RoIAlign's own convention (aligned=False: cell i
+    at i x stride), so RoIAlign on the result at scale 2s samples exactly what it samples on
+    ``x`` at scale s — unlike ``interpolate(..., align_corners=False)``, a quarter-cell shift."""
+    h, w = x.shape[-2:]
+    y = torch.nn.functional.interpolate(x, size=(2 * h - 1, 2 * w - 1), mode="bilinear",
+                                        align_corners=True)
+    return torch.nn.functional.pad(y, (0, 1, 0, 1), mode="replicate")
+
+
+class _Backbone(nn.Module):
+    """Trunk + FPN on strides 8/16/32 (+ pooled 64), as torchvision's BackboneWithFPN (same
+    parameter names), plus a fine level "p2" at stride 4 for the mask head only: the stride-8
+    level upsampled, plus the trunk's stride-4 features through a small branch whose last conv
+    starts at zero. Blades are mostly 2-5 px wide at 640 x 480 (instance IoU 0.42 below 3 px,
+    0.85 above 12 px, run 17): at stride 8 a blade's edges fall inside one feature cell."""
+
+    def __init__(self, trunk: nn.Module):
+        super().__init__()
+        self.body = IntermediateLayerGetter(trunk, {"layer1": "c2", "layer2": "0", "layer3": "1",
+                                                    "layer4": "2"})
+        self.fpn = FeaturePyramidNetwork([128, 256, 256], FPN_CHANNELS, extra_blocks=LastLevelMaxPool())
+        self.fine = nn.Sequential(nn.Conv2d(64, 64, 3, padding=1), nn.ReLU(inplace=True),
+                                  nn.Conv2d(64, FPN_CHANNELS, 1))
+        nn.init.zeros_(self.fine[2].weight)
+        nn.init.zeros_(self.fine[2].bias)
+        self.out_channels = FPN_CHANNELS
+
+    def forward(self, x: torch.Tensor) -> dict[str, torch.Tensor]:
+        c = self.body(x)
+        c2 = c.pop("c2")
+        feats = self.fpn(c)
+        feats[FINE] = _upsample2(feats["0"]) + self.fine(c2)
+        return feats
+
+
+FINE = "p2"
+
+
+class _CoarseRPN(RegionProposalNetwork):
+    """The RPN of torchvision, on the FPN's levels without the fine one (which only the mask
+    head pools from: proposals and anchors stay as trained)."""
+
+    def forward(self, images, features, targets=None):
+        return super().forward(images, {k: v for k, v in features.items() if k != FINE}, targets)
+
+
+class _FineMaskPool(MultiScaleRoIAlign):
+    """torchvision's multi-scale RoIAlign with its level choice unchanged (by box size, over
+    strides 8/16/32), except that boxes of the stride-8 level pool from the stride-4 one."""
+
+    def forward(self, x, boxes, image_shapes):
+        feats = [x[n] for n in self.featmap_names]
+        if self.scales is None or self.map_levels is None:
+            self.scales, self.map_levels = _setup_scales(feats, image_shapes, self.canonical_scale,
+                                                         self.canonical_level)
+        feats[0] = x[FINE]
+        scales = [self.scales[0] * 2] + list(self.scales[1:])
+        return _multiscale_roi_align(feats, boxes, self.output_size, self.sampling_ratio, scales,
+                                     self.map_levels)
+
+
 class _Transform(GeneralizedRCNNTransform):
     """torchvision's resize and normalisation, except that training masks are resized by
     area (antialiased bilinear, then >= 0.5), not nearest neighbour. Nearest shifts a
@@ -83,9 +151,7 @@ class _Transform(GeneralizedRCNNTransform):
 
 def build_model(detections_per_img: int = 20) -> MaskRCNN:
     """The network with random weights (no download). Call ``load_weights`` to make it useful."""
-    trunk = _trunk()
-    backbone = BackboneWithFPN(trunk, {"layer2": "0", "layer3": "1", "layer4": "2"},
-                               [128, 256, 256], FPN_CHANNELS, extra_blocks=LastLevelMaxPool())
+    backbone = _Backbone(_trunk())
     # Blades are long and thin: tall and wide anchors beside square ones; 9 per location.
     anchors = AnchorGenerator(sizes=((16, 24, 32), (32, 48, 64), (64, 96, 128), (128, 192, 320)),
                               aspect_ratios=((0.33, 1.0, 3.0),) * 4)
@@ -103,10 +169,11 @@ def build_model(detections_per_img: int = 20) -> MaskRCNN:
         box_predictor=FastRCNNPredictor(256, NUM_CLASSES),
         box_batch_size_per_image=128, box_detections_per_img=detections_per_img,
         box_score_thresh=0.05,
-        mask_roi_pool=MultiScaleRoIAlign(names, 14, 2),
+        mask_roi_pool=_FineMaskPool(names, 14, 2),
         mask_head=MaskRCNNHeads(FPN_CHANNELS, [128, 128], 1),
         mask_predictor=MaskRCNNPredictor(128, 128, NUM_CLASSES),
     )
+    model.rpn.__class__ = _CoarseRPN  # same RPN, same parameters; only the levels it sees
     t = model.transform
     model.transform = _Transform(t.min_size, t.max_size, t.image_mean, t.image_std)
     return model
@@ -168,7 +235,7 @@ def load_weights(model: nn.Module, path: str | Path | None = None) -> dict[str, 
         raise ModelError(f"{p}: expected a dict with 'state_dict', got {type(blob).__name__}")
     state = blob.get("state_dict", blob.get("model"))
     arch = blob.get("arch", ARCH)
-    if arch != ARCH:
+    if arch not in (ARCH, ARCH_BEFORE_P2):
         raise ModelError(f"{p}: weights are for architecture {arch!r}, this wtinspect builds {ARCH!r}")
     if not isinstance(state, dict):
         raise ModelError(f"{p}: no 'state_dict' in the file")
@@ -176,7 +243,15 @@ def load_weights(model: nn.Module, path: str | Path | None = None) -> dict[str, 
     state = {k: (v.to(ref[k].dtype) if k in ref and v.is_floating_point() else v)
              for k, v in state.items()}
     try:
-        model.load_state_dict(state, strict=True)
+        if arch == ARCH_BEFORE_P2:  # the fine branch stays at zero: the network as trained
+            missing, unexpected = model.load_state_dict(state, strict=False)
+            if unexpected or any(not k.startswith("backbone.fine.") for k in missing):
+                model.load_state_dict(state, strict=True)  # raises, naming the keys
+            last = model.backbone.fine[-1]
+            nn.init.zeros_(last.weight)
+            nn.init.zeros_(last.bias)
+        else:
+            model.load_state_dict(state, strict=True)
     except RuntimeError as e:
         first = str(e).splitlines()[0:2]
         raise ModelError(f"{p}: weights do not fit the model ({' '.join(first)[:200]})") from None

@@ -195,6 +195,9 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
         if not ckpt_path.is_file():
             raise InputError(f"{ckpt_path}: no checkpoint to resume from (run without --resume first)")
         state = _load_ckpt(ckpt_path)
+        if state.get("arch") != ARCH:
+            raise ModelError(f"{ckpt_path}: a checkpoint of architecture {state.get('arch')!r}, this "
+                             f"wtinspect trains {ARCH!r}; start a new run with --init {out / 'model.pt'}")
         model.load_state_dict(state["state_dict"])
         start_it, elapsed0 = int(state["iteration"]), float(state.get("elapsed_s", 0.0))
         history = list(state.get("history", []))
