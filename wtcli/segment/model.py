@@ -21,9 +21,9 @@ from typing import Any
 import torch
 from torch import nn
 from torchvision.models import resnet18
+from torchvision.models._utils import IntermediateLayerGetter
 from torchvision.models.detection import MaskRCNN
 from torchvision.models.detection.anchor_utils import AnchorGenerator
-from torchvision.models._utils import IntermediateLayerGetter
 from torchvision.models.detection.faster_rcnn import FastRCNNPredictor, TwoMLPHead
 from torchvision.models.detection.mask_rcnn import MaskRCNNHeads, MaskRCNNPredictor
 from torchvision.models.detection.rpn import RegionProposalNetwork, RPNHead
@@ -56,6 +56,7 @@ INFER_MAX_SIZE = 1024
 TRAIN_MIN_SIZES = (320, 352, 384, 416)
 TRAIN_MAX_SIZE = 555
 FPN_CHANNELS = 128
+FINE = "p2"  # the stride-4 level's name among the backbone's features (mask head only)
 
 
 def _trunk() -> nn.Module:
@@ -101,9 +102,6 @@ class _Backbone(nn.Module):
         feats = self.fpn(c)
         feats[FINE] = _upsample2(feats["0"]) + self.fine(c2)
         return feats
-
-
-FINE = "p2"
 
 
 class _CoarseRPN(RegionProposalNetwork):
@@ -243,7 +241,7 @@ def load_weights(model: nn.Module, path: str | Path | None = None) -> dict[str, 
     state = {k: (v.to(ref[k].dtype) if k in ref and v.is_floating_point() else v)
              for k, v in state.items()}
     try:
-        if arch == ARCH_BEFORE_P2:  # the fine branch stays at zero: the network as trained
+        if arch == ARCH_BEFORE_P2:  # the fine branch set to zero: the network as trained
             missing, unexpected = model.load_state_dict(state, strict=False)
             if unexpected or any(not k.startswith("backbone.fine.") for k in missing):
                 model.load_state_dict(state, strict=True)  # raises, naming the keys
