@@ -75,7 +75,6 @@ def test_weights_round_trip_fp16(random_weights, tmp_path):
     assert (tmp_path / "again.pt").stat().st_size < 25e6
 
 
-
 def test_fine_level_pools_what_the_stride_8_level_pools():
     """The stride-4 level starts as the stride-8 one upsampled: RoIAlign on it at twice the
     scale samples exactly the same values (so weights from before it load unchanged)."""
@@ -125,6 +124,7 @@ def test_rpn_does_not_see_the_fine_level():
         f["p2"] = torch.rand_like(f["p2"]) * 100
         b = m.rpn(images, f)[0][0]
     assert torch.equal(a, b)
+
 
 def test_missing_weights_is_model_error(tmp_path):
     p = tmp_path / "nope.pt"

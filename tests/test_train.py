@@ -64,13 +64,13 @@ def test_resume_without_checkpoint_is_input_error(tmp_path):
         train(_tiny(tmp_path, resume=True))
 
 
-
 def test_resume_of_another_architecture_is_model_error(tmp_path):
     run = tmp_path / "run"
     run.mkdir()
     torch.save({"arch": "wtseg-r18s-fpn128", "state_dict": {}, "iteration": 5}, run / "last.ckpt")
     with pytest.raises(ModelError, match="architecture 'wtseg-r18s-fpn128'.*--init"):
         train(_tiny(tmp_path, resume=True))
+
 
 @pytest.mark.parametrize("kw", [{"iterations": 0}, {"lr": -1.0}, {"width": 8}, {"batch_size": 0},
                                 {"train_sizes": ()}, {"train_sizes": (480, 10)},
