@@ -33,6 +33,10 @@
    views (with and without completion). These photos are for evaluation only: never train on
    them or copy them into the repo.
 
+4. Edge refinement (``wtcli.segment.refine``, session 21; ``--no-refine`` skips it): every figure
+   of the second look again with the instances' edges refined, as ``segment`` gives them
+   (``synthetic.refined``, ``real.refined``), and the speed with it (``speed.ours_refined_...``).
+
 Results are printed and written as JSON (``--out``, default benchmarks/results/segment_accuracy.json).
 
 ``--dev`` runs part 1 alone on the development seeds (``render_sample(7_000_000 + i, ...)``, the
@@ -62,6 +66,7 @@ from wtcli.segment.evaluate import Evaluator, mask_iou  # noqa: E402
 from wtcli.pitch import CANDIDATE_FLOOR, DEFAULT_SCORE_THRESHOLD  # noqa: E402
 from wtcli.segment.infer import load_model, predict, second_look  # noqa: E402
 from wtcli.segment.model import resolve_weights  # noqa: E402
+from wtcli.segment.refine import load_refiner, refine_edges, resolve_refiner  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 # The blade count is also split by how much of the frame the rotor spans (its diameter /
@@ -112,7 +117,7 @@ def completion_input(pred: Instances) -> Instances:
 
 
 def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | None = None,
-              seed_base: int = HELDOUT_SEED_BASE) -> dict:
+              seed_base: int = HELDOUT_SEED_BASE, refiner=None) -> dict:
     from wtcli.synth.render import render_sample
 
     ev = Evaluator(0.5)
@@ -120,6 +125,9 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
     # (docs/synth.md, label convention), so figures stay comparable across the change.
     ev_half, zev_half = Evaluator(0.5), Evaluator(0.5)
     zoom = {"ev": Evaluator(0.5), "right": 0, "errs": [], "by_fill": {"distant": [0, 0], "working": [0, 0]}}
+    # What `segment` gives since session 21: the second look's instances, edges refined.
+    rf = {"ev": Evaluator(0.5), "half": Evaluator(0.5), "right": 0, "errs": [],
+          "by_fill": {"distant": [0, 0], "working": [0, 0]}}
     views: dict[str, int] = {}
     grounds: dict[str, int] = {}
     front_n = front_right = front_right0 = gt_right = 0
@@ -147,6 +155,10 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
                              view="front" if i % 2 == 0 else None, labels="half").instances
         ev_half.add(pred, half)
         zev_half.add(zpred, half)
+        rpred = refine_edges(refiner, s.image, zpred) if refiner is not None else None
+        if rpred is not None:
+            rf["ev"].add(rpred, s.instances)
+            rf["half"].add(rpred, half)
         if s.truth["view"] == "front":
             front_n += 1
             conf = pred[pred.scores >= 0.5] if len(pred) else pred
@@ -166,6 +178,13 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
                 wrong.append({"seed": seed_base + i, "blades_visible": s.truth["blades_visible"],
                               "found": kz, "found_first_pass": k, "fill": round(s.truth["fill"], 3)})
             zoom["errs"] += ez
+            if rpred is not None:
+                kr, er, _ = pitch_errors(completion_input(rpred), s.truth, completion=True)
+                rf["right"] += kr == s.truth["blades_visible"]
+                rf["errs"] += er
+                rb = rf["by_fill"]["distant" if s.truth["fill"] < FILL_WORKING else "working"]
+                rb[0] += 1
+                rb[1] += kr == s.truth["blades_visible"]
             zb = zoom["by_fill"]["distant" if s.truth["fill"] < FILL_WORKING else "working"]
             zb[0] += 1
             zb[1] += kz == s.truth["blades_visible"]
@@ -187,7 +206,20 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
         "theta_blades_measured": len(zoom["errs"]),
         "front_wrong_blade_count": wrong,
     })
+    refined = None
+    if refiner is not None:
+        refined = rf["ev"].summary()
+        refined.update({
+            "half_labels": rf["half"].summary(),
+            "front_right_blade_count": rf["right"] / front_n if front_n else None,
+            "front_right_blade_count_by_fill": {k: (r / n if n else None) for k, (n, r) in rf["by_fill"].items()},
+            "theta_error_mean_deg": float(np.mean(rf["errs"])) if rf["errs"] else None,
+            "theta_error_median_deg": float(np.median(rf["errs"])) if rf["errs"] else None,
+            "theta_error_p95_deg": float(np.percentile(rf["errs"], 95)) if rf["errs"] else None,
+            "theta_blades_measured": len(rf["errs"]),
+        })
     out.update({
+        "refined": refined,
         "labels": "outline",
         "half_labels": {"first_pass": ev_half.summary(), "zoom": zev_half.summary()},
         "zoom": zs,
@@ -220,7 +252,7 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
     return out
 
 
-def speed(model, runs: int, with_stock: bool, fp32_model=None) -> dict:
+def speed(model, runs: int, with_stock: bool, fp32_model=None, refiner=None) -> dict:
     from wtcli.synth.render import render_sample
 
     img = render_sample(HELDOUT_SEED_BASE + 999_999, width=1024, height=683, view="front").image
@@ -244,6 +276,9 @@ def speed(model, runs: int, with_stock: bool, fp32_model=None) -> dict:
     out = {"input": "1024x683 BGR render", "runs": runs, "threads": torch.get_num_threads(),
            "precision": getattr(model, "precision", "fp32"),
            "ours_images_per_s": ours, "ours_with_zoom_images_per_s": zoomed}
+    if refiner is not None:  # the network, then the edge refiner: what `segment --no-zoom` runs
+        out["ours_refined_images_per_s"] = clock(
+            lambda: refine_edges(refiner, img, predict(model, img, score_threshold=0.5)))
     # Without the mirrored masks (segment --no-flip), for the record.
     out["ours_no_flip_images_per_s"] = clock(lambda: predict(model, img, score_threshold=0.5, flip=False))
     if fp32_model is not None:  # the same network in float32, for the record
@@ -261,6 +296,8 @@ def speed(model, runs: int, with_stock: bool, fp32_model=None) -> dict:
 
         out["stock_r50_fpn_images_per_s"] = clock(run_stock)
         out["speedup_vs_stock"] = ours / out["stock_r50_fpn_images_per_s"]
+        if "ours_refined_images_per_s" in out:
+            out["speedup_vs_stock_refined"] = out["ours_refined_images_per_s"] / out["stock_r50_fpn_images_per_s"]
         out["speedup_vs_stock_no_flip"] = out["ours_no_flip_images_per_s"] / out["stock_r50_fpn_images_per_s"]
         if "ours_fp32_images_per_s" in out:
             out["speedup_vs_stock_fp32"] = out["ours_fp32_images_per_s"] / out["stock_r50_fpn_images_per_s"]
@@ -275,7 +312,7 @@ def _col(fields: list[str], *keys: str) -> str | None:
     return None
 
 
-def real_photos(model, root: Path, log) -> dict:
+def real_photos(model, root: Path, log, refiner=None) -> dict:
     """IoU on the real photos' semantic masks; blade count on their front views."""
     man = root / "manifest.csv"
     rows = list(csv.DictReader(man.open(encoding="utf-8"))) if man.is_file() else []
@@ -295,6 +332,9 @@ def real_photos(model, root: Path, log) -> dict:
     blade_iou, tower_iou, counts, counts0 = [], [], [], []
     errors, per_photo = [], []
     zoom: dict[str, list] = {"blade_iou": [], "tower_iou": [], "counts": []}
+    # refined: the first pass's and the second look's instances with their edges refined
+    ref: dict[str, list] = {"blade_iou": [], "tower_iou": [], "zoom_blade_iou": [], "zoom_tower_iou": [],
+                            "counts": []}
     for ip, mp, view in items:
         img = cv2.imread(str(ip), cv2.IMREAD_COLOR)
         if mp is None or not mp.is_file():
@@ -320,10 +360,27 @@ def real_photos(model, root: Path, log) -> dict:
         ztower = (zpred.of("tower").union() | zpred.of("nacelle").union()) if len(zpred) else np.zeros(sem.shape, bool)
         zoom["blade_iou"].append(mask_iou(zblade, sem == 1))
         zoom["tower_iou"].append(mask_iou(ztower, sem == 2))
+        if refiner is not None:
+            for key, inst in (("", pred), ("zoom_", zpred)):
+                r = refine_edges(refiner, img, inst)
+                rb = r.of("blade").union() if len(r) else np.zeros(sem.shape, bool)
+                rt = (r.of("tower").union() | r.of("nacelle").union()) if len(r) else np.zeros(sem.shape, bool)
+                ref[key + "blade_iou"].append(mask_iou(rb, sem == 1))
+                ref[key + "tower_iou"].append(mask_iou(rt, sem == 2))
+            if "front" in view.lower():
+                from wtcli.pitch import pitch_from_instances
+
+                try:
+                    ref["counts"].append(len(pitch_from_instances(
+                        refine_edges(refiner, img, completion_input(zlow)), expected_blades=None).blades))
+                except WtError:
+                    ref["counts"].append(0)
         per_photo.append({"image": ip.name, "view": view, "blade_iou": round(blade_iou[-1], 4),
                           "tower_iou": round(tower_iou[-1], 4),
                           "zoom_blade_iou": round(zoom["blade_iou"][-1], 4),
                           "zoom_tower_iou": round(zoom["tower_iou"][-1], 4),
+                          **({"refined_blade_iou": round(ref["blade_iou"][-1], 4),
+                              "refined_tower_iou": round(ref["tower_iou"][-1], 4)} if refiner is not None else {}),
                           # predicted / true blade pixels: < 1 where blades come out too thin
                           "blade_area_ratio": round(float(blade.sum()) / max(int((sem == 1).sum()), 1), 3)})
         if "front" in view.lower():
@@ -338,7 +395,14 @@ def real_photos(model, root: Path, log) -> dict:
     log(f"  real photos: {len(blade_iou)} evaluated, {len(errors)} unreadable")
     far = [r for r in per_photo if "distant" in r["view"].lower()]
     near = [r for r in per_photo if "distant" not in r["view"].lower()]
-    return {"photos": len(blade_iou), "unreadable": errors,
+    refined = None
+    if refiner is not None and ref["blade_iou"]:
+        refined = {k: float(np.mean(v)) for k, v in ref.items() if k != "counts"}
+        refined["blade_iou_distant"] = float(np.mean([r["refined_blade_iou"] for r in far])) if far else None
+        refined["front_blade_counts"] = ref["counts"]
+        refined["front_blade_count_3"] = (sum(c == 3 for c in ref["counts"]) / len(ref["counts"])
+                                          if ref["counts"] else None)
+    return {"photos": len(blade_iou), "unreadable": errors, "refined": refined,
             "blade_iou_distant": float(np.mean([r["blade_iou"] for r in far])) if far else None,
             "blade_iou_not_distant": float(np.mean([r["blade_iou"] for r in near])) if near else None,
             "distant_photos": len(far),
@@ -376,6 +440,9 @@ def main(argv: list[str] | None = None) -> dict:
                     help="the synthetic part on the development seeds (7 000 000 + i) instead of the "
                          "held-out ones, and no speed or real-photo part: for looking into errors "
                          "and choosing settings without spending the held-out set (needs --out)")
+    ap.add_argument("--refiner", default=None,
+                    help="edge refiner weights (default: the shipped models/wtseg-refine.pt)")
+    ap.add_argument("--no-refine", action="store_true", help="skip the refined figures")
     ap.add_argument("--out", default=None)
     a = ap.parse_args(argv)
     if a.dev and not a.out:
@@ -393,22 +460,25 @@ def main(argv: list[str] | None = None) -> dict:
                     # the network's working size (shorter side, longer side at most)
                     "working_size": [int(model.transform.min_size[0]), int(model.transform.max_size)]}
     result["precision"] = model.precision
+    refiner = None if a.no_refine else load_refiner(a.refiner)
+    result["refiner"] = None if refiner is None else str(resolve_refiner(a.refiner))
     if not a.dev:
         log(f"speed ({a.speed_runs} runs each)")
         result["speed"] = speed(model, a.speed_runs, not a.no_stock,
-                                load_model(weights, "cpu", "fp32") if model.precision != "fp32" else None)
+                                load_model(weights, "cpu", "fp32") if model.precision != "fp32" else None,
+                                refiner)
     real = Path(a.real)
     if a.dev:
         result["real"] = None
     elif real.is_dir():
-        result["real"] = real_photos(model, real, log)
+        result["real"] = real_photos(model, real, log, refiner)
     else:
         result["real"] = None
         log(f"  {real}: not here, real-photo figures skipped")
     if a.n > 0:
         log(f"{'development' if a.dev else 'held-out'} synthetic set: {a.n} images")
         result["synthetic"] = synthetic(model, a.n, a.width, a.height, log, a.max_minutes,
-                                        DEV_SEED_BASE if a.dev else HELDOUT_SEED_BASE)
+                                        DEV_SEED_BASE if a.dev else HELDOUT_SEED_BASE, refiner)
     write_json(a.out, document("wtinspect.benchmark.segment_accuracy", 1, result))
     import json
 

@@ -27,6 +27,12 @@ def segment(
                               help="Detect the photo and its mirror image together (fewer "
                                    "missed blades, truer thin ones; --no-flip: about 2x "
                                    "faster)."),
+    refine: bool = typer.Option(True, "--refine/--no-refine",
+                                help="Decide each mask's edge again, pixel by pixel, with the edge "
+                                     "refiner (docs/segment.md)."),
+    refiner: Optional[Path] = typer.Option(None, "--refiner",
+                                           help="Edge refiner weights (default: "
+                                                "models/wtseg-refine.pt)."),
     device: str = typer.Option("auto", "--device", help="auto (GPU if present) | cpu | cuda[:N]."),
     precision: str = typer.Option("auto", "--precision",
                                   help="auto | fp32 | bf16. auto: the backbone in bfloat16 on a "
@@ -47,22 +53,26 @@ def segment(
     from wtcli.segment.batch import find_images, segment_paths, write_batch_files
     from wtcli.segment.infer import load_model, predict, second_look
     from wtcli.segment.model import resolve_weights
+    from wtcli.segment.refine import load_refiner, refine_edges, resolve_refiner
 
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: exists and is not a folder; choose another --out")
     _, files = find_images(path, recursive)  # errors (no such path, empty folder) before loading
     weights = resolve_weights(model)
     net = load_model(weights, device, precision)
+    edges = load_refiner(refiner) if refine else None
 
     def run(img):
         inst = predict(net, img, score_threshold=score_threshold, max_size=max_size, flip=flip)
-        return second_look(net, img, inst, score_threshold, max_size, flip) if zoom else inst
+        if zoom:
+            inst = second_look(net, img, inst, score_threshold, max_size, flip)
+        return refine_edges(edges, img, inst) if edges is not None else inst
 
     with count_bar("segment", len(files)) as advance:
         results = segment_paths(path, out, run, recursive=recursive, resume=resume,
                                 on_progress=lambda res: advance(f"{res.rel} {res.status}"))
     settings = {"score_threshold": score_threshold, "max_size": max_size, "zoom": zoom, "flip": flip,
-                "model": str(weights),
+                "model": str(weights), "refiner": str(resolve_refiner(refiner)) if refine else None,
                 "device": str(next(net.parameters()).device), "precision": net.precision}
     report = write_batch_files(out, results, settings)
 

@@ -366,7 +366,8 @@ def segment_image(image_bgr: np.ndarray, model: torch.nn.Module | None = None,
                   score_threshold: float = DEFAULT_SCORE_THRESHOLD, max_size: int | None = DEFAULT_MAX_SIZE,
                   device: str | None = None, weights: str | Path | None = None,
                   candidate_floor: float | None = CANDIDATE_FLOOR, zoom: bool = True,
-                  flip: bool = True) -> Instances:
+                  flip: bool = True, refine: bool = True, refiner: str | Path | None = None
+                  ) -> Instances:
     """The one call other stages use: segment a BGR photo with the shipped model (loaded lazily
     and cached) or the ``model`` given.
 
@@ -377,13 +378,18 @@ def segment_image(image_bgr: np.ndarray, model: torch.nn.Module | None = None,
     without ``zoom`` it is the same as predicting at that threshold (duplicates are dropped
     greedily by score). ``zoom``: small turbines get a ``second_look`` (at the lower threshold,
     as ``segment --score-threshold 0.2`` does, so files chain to the same result). ``flip``: as
-    ``predict``'s."""
+    ``predict``'s. ``refine``: the masks' edges decided again by the edge refiner
+    (``wtcli.segment.refine``; ``refiner``: its weights, default the shipped ones)."""
     if model is None:
         model = load_model(weights, device)
     floor = score_threshold if candidate_floor is None else min(candidate_floor, score_threshold)
     inst = predict(model, image_bgr, floor, max_size, flip=flip)
     if zoom:
         inst = second_look(model, image_bgr, inst, floor, max_size, flip)
+    if refine:
+        from wtcli.segment.refine import load_refiner, refine_edges
+
+        inst = refine_edges(load_refiner(refiner), image_bgr, inst)
     if not len(inst) or floor >= score_threshold:
         return inst
     return inst[(inst.scores >= score_threshold) | (inst.labels == "blade")]

@@ -1,0 +1,163 @@
+"""The edge refiner: band and features, what it does to masks (the shipped weights fix a mask a
+pixel too wide or too thin on a clean edge, keep far pixels, work on large photos), its file's
+errors, and `train-refiner` (a tiny run, resume, a run folder not reused by mistake)."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from wtcli.errors import ConfigError, ExitCode, InputError, ModelError
+from wtcli.masks import Instances
+from wtcli.segment import refine as R
+from wtcli.segment.train_refine import RefinerConfig, train_refiner
+
+
+def _iou(a, b):
+    return (a & b).sum() / (a | b).sum()
+
+
+def _blade_photo(h=240, w=320, width=5):
+    """Sky-grey photo with a light diagonal blade ``width`` px wide, as renders and photos show
+    one (soft anti-aliased edge); its true mask."""
+    img = np.full((h, w, 3), (190, 160, 130), np.uint8)  # BGR: a blue-grey sky
+    truth = np.zeros((h, w), np.uint8)
+    cv2.line(truth, (30, 200), (290, 40), 1, width)
+    big = cv2.resize(truth * 255, (w * 4, h * 4), interpolation=cv2.INTER_NEAREST)
+    alpha = cv2.resize(cv2.GaussianBlur(big.astype(np.float32), (5, 5), 0), (w, h),
+                       interpolation=cv2.INTER_AREA)[..., None] / 255.0
+    img = (img * (1 - alpha) + np.array([235, 235, 235]) * alpha).astype(np.uint8)
+    return img, truth.astype(bool)
+
+
+def _inst(mask, label="blade"):
+    ys, xs = np.nonzero(mask)
+    return Instances(np.array([label], object), mask[None], np.array([0.9]),
+                     np.array([[xs.min(), ys.min(), xs.max() + 1, ys.max() + 1]], float))
+
+
+def test_band_is_the_pixels_near_the_boundary():
+    m = np.zeros((20, 20), bool)
+    m[5:15, 5:15] = True
+    b = R.band(m, 2)
+    assert b[5, 5] and b[3, 10] and b[6, 10] and not b[10, 10] and not b[2, 10]
+    assert b.sum() == 14 * 14 - 6 * 6
+
+
+def test_features_shape_and_centre_pixel():
+    img, truth = _blade_photo()
+    got = R.instance_pixels(img, truth)
+    (y0, x0), crop, m, px = got
+    f = R.features(crop, m, "blade", px[:, 0], px[:, 1])
+    assert f.shape == (len(px), R.N_FEATURES) and f.dtype == np.float32
+    centre = 3 * R.PATCH * R.PATCH + R.PATCH * R.PATCH // 2
+    assert np.array_equal(f[:, centre] > 0, m[px[:, 0], px[:, 1]])  # the mask at the pixel itself
+    assert np.isfinite(f).all() and np.abs(f).max() <= 1.0
+
+
+@pytest.mark.parametrize("change", ["dilate", "erode"])
+def test_shipped_refiner_moves_a_wrong_edge_to_the_blade(change):
+    img, truth = _blade_photo(width=6)
+    k = np.ones((3, 3), np.uint8)
+    wrong = (cv2.dilate if change == "dilate" else cv2.erode)(truth.astype(np.uint8), k) > 0
+    out = R.refine_edges(R.load_refiner(), img, _inst(wrong))
+    before, after = _iou(wrong, truth), _iou(out.masks[0], truth)
+    assert after > before + 0.1, (before, after)
+    # pixels farther than the band from the mask's boundary are not touched
+    far = ~(cv2.dilate(wrong.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0)
+    assert not out.masks[0][far].any()
+
+
+def test_large_photos_refined_at_the_working_size_keep_their_size():
+    img, truth = _blade_photo(480, 640, 10)
+    ref = R.load_refiner()
+    out = R.refine_edges(ref, img, _inst(truth), max_size=320)
+    assert out.masks.shape == (1, 480, 640)
+    assert _iou(out.masks[0], truth) > 0.8
+
+
+def test_empty_and_vanishing_masks_are_kept():
+    ref = R.load_refiner()
+    empty = Instances.empty(50, 60)
+    assert len(R.refine_edges(ref, np.zeros((50, 60, 3), np.uint8), empty)) == 0
+    img = np.full((50, 60, 3), 128, np.uint8)  # nothing to see: the refiner may say "no" everywhere
+    m = np.zeros((50, 60), bool)
+    m[20:22, 10:50] = True
+    out = R.refine_edges(ref, img, _inst(m))
+    assert out.masks[0].any()  # a mask the refiner would empty keeps its own
+
+
+def test_refiner_file_errors_name_the_file(tmp_path):
+    with pytest.raises(ModelError, match="missing.pt: refiner weights not found"):
+        R.load_refiner(tmp_path / "missing.pt")
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"not a torch file")
+    with pytest.raises(ModelError, match="bad.pt: not a readable refiner file"):
+        R.load_refiner(bad)
+    other = tmp_path / "other.pt"
+    torch.save({"arch": "wtseg-r18s-fpn128-p2", "state_dict": {}}, other)
+    with pytest.raises(ModelError, match="other.pt: not refiner weights"):
+        R.load_refiner(other)
+    short = tmp_path / "short.pt"
+    torch.save({"arch": R.ARCH, "state_dict": {"net.0.weight": torch.zeros(3, 3)}}, short)
+    with pytest.raises(ModelError, match="short.pt: refiner weights do not fit"):
+        R.load_refiner(short)
+
+
+def test_train_refiner_tiny_run_resume_and_reuse(tmp_path):
+    cfg = RefinerConfig(out=str(tmp_path / "run"), images=4, epochs=1, eval_count=1, threads=1)
+    seen = []
+    s = train_refiner(cfg, progress=seen.append)
+    stages = [r["stage"] for r in seen]
+    assert stages.count("data") == 4 and stages[-1] == "fit"
+    run = tmp_path / "run"
+    assert {"data", "last.ckpt", "refiner.pt", "metrics.json"} <= {p.name for p in run.iterdir()}
+    m = json.loads((run / "metrics.json").read_text())
+    assert m["schema"] == "wtinspect.train_refiner" and m["pixels"] > 20_000
+    assert set(m["evaluation"]) == {"unrefined", "refined"}
+    ref = R.load_refiner(run / "refiner.pt")
+    assert ref.meta["images"] == 4
+    with pytest.raises(InputError, match="holds a run already"):
+        train_refiner(cfg)
+    # resumed: the data on disk is used (no render), the finished pass is not redone
+    seen.clear()
+    cfg.resume, cfg.eval_count = True, 0
+    s2 = train_refiner(cfg, progress=seen.append)
+    assert [r.get("skipped") for r in seen] == [True] * 4  # the part on disk, no fit step
+    assert s2["history"] == s["history"] and s2["pixels"] == s["pixels"]
+    cfg.epochs = 2
+    with pytest.raises(ConfigError, match="resume it with those, not 2"):
+        train_refiner(cfg)
+
+
+def test_train_refiner_cli_errors(cli, tmp_path):
+    res = cli("train-refiner", "--images", "0", "--out", str(tmp_path / "r"))
+    assert res.exit_code == ExitCode.CONFIG and "--images 0" in res.stderr
+    res = cli("train-refiner", "--seed", "7", "--out", str(tmp_path / "r"))
+    assert res.exit_code == ExitCode.CONFIG and "--seed 7" in res.stderr
+
+
+def test_segment_refines_by_default_and_says_so(cli, tmp_path):
+    from pathlib import Path
+
+    from wtcli.masks import read_instances
+
+    photo = Path(__file__).resolve().parents[1] / "sample_images" / "images" / "00000.jpg"
+    got = {}
+    for flag in ("--refine", "--no-refine"):
+        res = cli("segment", photo, "--out", tmp_path / flag, "--json", flag)
+        assert res.exit_code == 0, res.stderr
+        ref = json.loads(res.stdout)["settings"]["refiner"]
+        assert (ref is None) is (flag == "--no-refine")
+        assert ref is None or ref.endswith("wtseg-refine.pt")
+        [(_, inst)] = read_instances(tmp_path / flag / "instances.json")
+        got[flag] = inst
+    a, b = got["--refine"], got["--no-refine"]
+    # the same instances, their edges moved: a few per cent of the pixels, not the shapes
+    assert list(a.labels) == list(b.labels) and np.allclose(a.scores, b.scores, atol=1e-3)
+    assert not np.array_equal(a.masks, b.masks)
+    assert _iou(a.union(), b.union()) > 0.85

@@ -1,0 +1,267 @@
+"""`wtinspect train-refiner`: train the edge refiner (``wtcli.segment.refine``) on renders.
+
+Two stages, both resumable:
+1. data: ``images`` renders (scenes the segmenter never trained on, half of them with the
+   segmenter's own photometric augmentation: blur, noise, JPEG, colour) are segmented by the
+   segmenter as ``segment`` runs it; every instance's boundary band gives training pixels
+   (features, and whether the true mask of the instance's class covers the pixel). Written
+   as OUT/data/part-NNNN.npz, PART images each; a resumed run skips the parts on disk.
+2. fit: the MLP trained on them (AdamW, one-cycle schedule, ``epochs`` passes), checkpointed
+   after each pass to OUT/last.ckpt; then OUT/refiner.pt and OUT/metrics.json, with mask IoU
+   before and after refinement on ``eval_count`` held-out renders.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import torch
+
+from wtcli.errors import ConfigError, InputError, ModelError
+from wtcli.jsonio import document, write_json
+from wtcli.segment import refine as R
+from wtcli.segment.data import HELDOUT_SEED_BASE, TRAIN_SEED_BASE
+
+# Scenes TRAIN_SEED_BASE + 4_500_000 + 100_000 * seed + i: above the stretches the segmenter's
+# runs used (seeds 0-19), so its masks here have the errors it makes on photos it never saw.
+SCENE_BASE = TRAIN_SEED_BASE + 4_500_000
+SIZES = ((640, 480), (640, 480), (960, 640), (1280, 720))  # the renders' sizes, drawn per image
+PART = 50  # images per data file
+VAL_SAMPLES = 100_000  # band pixels held out of the fit, for its loss and accuracy
+REFINER_SCHEMA = "wtinspect.train_refiner"
+
+
+@dataclass
+class RefinerConfig:
+    out: str = "runs/refiner"
+    images: int = 1200
+    model: str | None = None  # the segmenter whose masks are refined; default the shipped one
+    seed: int = 0
+    epochs: int = 5
+    batch_size: int = 4096
+    lr: float = 2e-3
+    per_instance: int = 1500  # band pixels drawn per instance at most
+    eval_count: int = 16
+    threads: int | None = None
+    resume: bool = False
+
+    def check(self) -> None:
+        for name in ("images", "epochs", "batch_size", "per_instance"):
+            if getattr(self, name) < 1:
+                raise ConfigError(f"--{name.replace('_', '-')} {getattr(self, name)}: must be at least 1")
+        if not 0 <= self.seed < 5:
+            raise ConfigError(f"--seed {self.seed}: must be 0-4 (each seed has its own 100 000 scenes)")
+        if self.images > 100_000:
+            raise ConfigError(f"--images {self.images}: at most 100000 per seed")
+        if not self.lr > 0:
+            raise ConfigError(f"--lr {self.lr}: must be positive")
+        if self.eval_count < 0:
+            raise ConfigError(f"--eval-count {self.eval_count}: must be 0 or more")
+
+
+def scene(cfg: RefinerConfig, i: int, rng: np.random.Generator):
+    """Image ``i`` of the run: a render, augmented half the time."""
+    from wtcli.segment.data import augment
+    from wtcli.synth.render import render_sample
+
+    w, h = SIZES[int(rng.integers(len(SIZES)))]
+    s = render_sample(SCENE_BASE + 100_000 * cfg.seed + i, width=w, height=h,
+                      view="front" if i % 2 == 0 else None)
+    return augment(s, rng) if rng.random() < 0.5 else s
+
+
+def image_samples(image: np.ndarray, pred, truth, per_instance: int, rng: np.random.Generator
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """(features [N, F] float16, targets [N] bool) of the band pixels of each predicted
+    instance; target: the true mask of the instance's class covers the pixel."""
+    H, W = image.shape[:2]
+    union = {c: truth.of(c).union() if len(truth.of(c)) else np.zeros((H, W), bool) for c in R.LABELS}
+    xs, ys = [], []
+    for k in range(len(pred)):
+        got = R.instance_pixels(image, pred.masks[k])
+        if got is None or not len(got[3]):
+            continue
+        (y0, x0), img, m, px = got
+        if len(px) > per_instance:
+            px = px[np.sort(rng.choice(len(px), per_instance, replace=False))]
+        xs.append(R.features(img, m, pred.labels[k], px[:, 0], px[:, 1]).astype(np.float16))
+        ys.append(union[pred.labels[k]][y0 + px[:, 0], x0 + px[:, 1]])
+    if not xs:
+        return np.zeros((0, R.N_FEATURES), np.float16), np.zeros(0, bool)
+    return np.concatenate(xs), np.concatenate(ys)
+
+
+def make_data(cfg: RefinerConfig, progress: Callable[[dict[str, Any]], None] | None = None) -> list[Path]:
+    """Stage 1: the data parts (made where missing)."""
+    from wtcli.jsonio import atomic_write_bytes
+    from wtcli.segment.infer import load_model, segment_image
+
+    folder = Path(cfg.out) / "data"
+    folder.mkdir(parents=True, exist_ok=True)
+    parts = []
+    model = None
+    for p0 in range(0, cfg.images, PART):
+        path = folder / f"part-{p0 // PART:04d}.npz"
+        parts.append(path)
+        n = min(PART, cfg.images - p0)
+        if path.is_file():
+            for i in range(p0, p0 + n) if progress else ():  # one report per image, as made
+                progress({"stage": "data", "done": i + 1, "total": cfg.images, "skipped": True})
+            continue
+        if model is None:
+            model = load_model(cfg.model)
+        X, Y = [], []
+        for i in range(p0, p0 + n):
+            rng = np.random.default_rng([cfg.seed, i])
+            s = scene(cfg, i, rng)
+            pred = segment_image(s.image, model=model, refine=False)
+            x, y = image_samples(s.image, pred, s.instances, cfg.per_instance, rng)
+            X.append(x)
+            Y.append(y)
+            if progress:
+                progress({"stage": "data", "done": i + 1, "total": cfg.images})
+        import io
+
+        buf = io.BytesIO()
+        np.savez(buf, X=np.concatenate(X), Y=np.concatenate(Y))
+        atomic_write_bytes(path, buf.getvalue())
+    return parts
+
+
+def _load_parts(parts: list[Path]) -> tuple[np.ndarray, np.ndarray]:
+    X, Y = [], []
+    for p in parts:
+        try:
+            with np.load(p) as d:
+                X.append(d["X"])
+                Y.append(d["Y"])
+        except Exception as e:  # noqa: BLE001 - a damaged part: say which and how to redo it
+            raise InputError(f"{p}: unreadable training data ({e.__class__.__name__}); delete it "
+                             "and run again with --resume to make it anew") from None
+        if X[-1].ndim != 2 or X[-1].shape[1] != R.N_FEATURES or len(X[-1]) != len(Y[-1]):
+            raise InputError(f"{p}: training data of another feature layout; delete {p.parent} "
+                             "and run again")
+    return np.concatenate(X), np.concatenate(Y)
+
+
+def fit(cfg: RefinerConfig, X: np.ndarray, Y: np.ndarray,
+        progress: Callable[[dict[str, Any]], None] | None = None) -> tuple[R.Refiner, dict[str, Any]]:
+    """Stage 2: the MLP trained on (X, Y); resumes from OUT/last.ckpt after a whole pass."""
+    if len(X) < 2 * VAL_SAMPLES // 10:
+        raise InputError(f"only {len(X)} training pixels: segment more images (--images)")
+    torch.manual_seed(cfg.seed)
+    order = np.random.default_rng(cfg.seed).permutation(len(X))
+    nv = min(VAL_SAMPLES, len(X) // 10)
+    val, train = np.sort(order[:nv]), order[nv:]
+    xv = torch.from_numpy(X[val].astype(np.float32))
+    yv = torch.from_numpy(Y[val].astype(np.float32))
+    net = R.Refiner()
+    opt = torch.optim.AdamW(net.parameters(), cfg.lr, weight_decay=1e-4)
+    steps_per = max(1, len(train) // cfg.batch_size)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, cfg.lr, total_steps=cfg.epochs * steps_per,
+                                                pct_start=0.05)
+    loss_fn = torch.nn.BCEWithLogitsLoss()
+    ckpt = Path(cfg.out) / "last.ckpt"
+    epoch0, history = 0, []
+    if cfg.resume and ckpt.is_file():
+        try:
+            state = torch.load(ckpt, map_location="cpu", weights_only=True)
+            if int(state.get("epochs", cfg.epochs)) != cfg.epochs:
+                raise ConfigError(f"{ckpt}: a run of --epochs {state['epochs']} (its learning-rate "
+                                  f"schedule); resume it with those, not {cfg.epochs}")
+            net.load_state_dict(state["state_dict"])
+            opt.load_state_dict(state["optimizer"])
+            sched.load_state_dict(state["scheduler"])
+        except ConfigError:
+            raise
+        except Exception as e:  # noqa: BLE001
+            raise ModelError(f"{ckpt}: cannot resume from it ({e.__class__.__name__}); delete it to "
+                             "train the refiner anew on the data made") from None
+        epoch0, history = int(state["epoch"]), list(state.get("history", []))
+
+    def check() -> dict[str, float]:
+        net.eval()
+        with torch.no_grad():
+            lo = net(xv)
+        net.train()
+        return {"val_loss": loss_fn(lo, yv).item(),
+                "val_accuracy": ((lo > 0).float() == yv).float().mean().item()}
+
+    for epoch in range(epoch0, cfg.epochs):
+        perm = train[np.random.default_rng([cfg.seed, epoch]).permutation(len(train))]
+        for b in range(steps_per):
+            idx = np.sort(perm[b * cfg.batch_size:(b + 1) * cfg.batch_size])
+            x = torch.from_numpy(X[idx].astype(np.float32))
+            y = torch.from_numpy(Y[idx].astype(np.float32))
+            loss = loss_fn(net(x), y)
+            if not torch.isfinite(loss):
+                raise ModelError(f"refiner training diverged in pass {epoch + 1}; lower --lr (now {cfg.lr})")
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            sched.step()
+            if progress:
+                progress({"stage": "fit", "epoch": epoch + 1, "epochs": cfg.epochs,
+                          "done": epoch * steps_per + b + 1, "total": cfg.epochs * steps_per,
+                          "loss": loss.item()})
+        history.append({"epoch": epoch + 1, **check()})
+        import io
+
+        from wtcli.jsonio import atomic_write_bytes
+
+        buf = io.BytesIO()
+        torch.save({"epoch": epoch + 1, "epochs": cfg.epochs, "state_dict": net.state_dict(), "optimizer": opt.state_dict(),
+                    "scheduler": sched.state_dict(), "history": history}, buf)
+        atomic_write_bytes(ckpt, buf.getvalue())
+    mask = X[val, 3 * R.PATCH * R.PATCH + R.PATCH * R.PATCH // 2] > 0  # the mask at each pixel
+    net.eval()
+    return net, {"history": history, **check(), "train_pixels": int(len(train)),
+                 "val_accuracy_unrefined": float((mask == Y[val]).mean())}
+
+
+def evaluate(cfg: RefinerConfig, refiner: R.Refiner) -> dict[str, Any]:
+    """Mask IoU and AP50 per class on held-out renders (seeds HELDOUT + 600 000 + i), as
+    ``segment`` gives them and refined."""
+    from wtcli.segment.evaluate import Evaluator
+    from wtcli.segment.infer import load_model, segment_image
+    from wtcli.synth.render import render_sample
+
+    model = load_model(cfg.model)
+    plain, refined = Evaluator(), Evaluator()
+    for i in range(cfg.eval_count):
+        s = render_sample(HELDOUT_SEED_BASE + 600_000 + i, width=640, height=480,
+                          view="front" if i % 2 == 0 else None)
+        pred = segment_image(s.image, model=model, refine=False)
+        plain.add(pred, s.instances)
+        refined.add(R.refine_edges(refiner, s.image, pred), s.instances)
+    return {"unrefined": plain.summary(), "refined": refined.summary()}
+
+
+def train_refiner(cfg: RefinerConfig, progress: Callable[[dict[str, Any]], None] | None = None
+                  ) -> dict[str, Any]:
+    """Both stages (resuming what is on disk with ``resume``); the summary in OUT/metrics.json."""
+    cfg.check()
+    out = Path(cfg.out)
+    if not cfg.resume and (out / "data").is_dir() and any((out / "data").glob("part-*.npz")):
+        raise InputError(f"{out}: holds a run already; --resume to continue it, or pick another --out")
+    if cfg.threads:
+        torch.set_num_threads(int(cfg.threads))
+    t0 = time.monotonic()
+    parts = make_data(cfg, progress)
+    t1 = time.monotonic()
+    X, Y = _load_parts(parts)
+    net, stats = fit(cfg, X, Y, progress)
+    t2 = time.monotonic()
+    meta = {"images": cfg.images, "seed": cfg.seed, "epochs": cfg.epochs,
+            "segmenter": str(cfg.model or "shipped"), "val_accuracy": round(stats["val_accuracy"], 4)}
+    R.save_refiner(net, out / "refiner.pt", meta)
+    summary = {"arch": R.ARCH, "config": asdict(cfg), "data_seconds": t1 - t0, "fit_seconds": t2 - t1,
+               "pixels": int(len(X)), **stats,
+               "evaluation": evaluate(cfg, net) if cfg.eval_count else {},
+               "weights": str(out / "refiner.pt"), "checkpoint": str(out / "last.ckpt")}
+    write_json(out / "metrics.json", document(REFINER_SCHEMA, 1, summary))
+    return summary
