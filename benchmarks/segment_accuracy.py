@@ -85,6 +85,14 @@ def phi_diff(a: float, b: float) -> float:
     return min(d, 360.0 - d)
 
 
+def theta_stats(errs: list[float]) -> dict:
+    """Mean, median and p95 of |θ error| (deg) and how many blades they are over."""
+    return {"theta_error_mean_deg": float(np.mean(errs)) if errs else None,
+            "theta_error_median_deg": float(np.median(errs)) if errs else None,
+            "theta_error_p95_deg": float(np.percentile(errs, 95)) if errs else None,
+            "theta_blades_measured": len(errs)}
+
+
 def pitch_errors(inst: Instances, truth: dict, completion: bool = False
                  ) -> tuple[int, list[float], list[float]]:
     """(blades found, |θ error| of each found blade vs the true blade nearest in φ, the same
@@ -200,10 +208,7 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
         "detections_from": CANDIDATE_FLOOR,  # AP counts nothing below it (the plain figures: 0)
         "front_right_blade_count": zoom["right"] / front_n if front_n else None,
         "front_right_blade_count_by_fill": {k: (r / n if n else None) for k, (n, r) in zoom["by_fill"].items()},
-        "theta_error_mean_deg": float(np.mean(zoom["errs"])) if zoom["errs"] else None,
-        "theta_error_median_deg": float(np.median(zoom["errs"])) if zoom["errs"] else None,
-        "theta_error_p95_deg": float(np.percentile(zoom["errs"], 95)) if zoom["errs"] else None,
-        "theta_blades_measured": len(zoom["errs"]),
+        **theta_stats(zoom["errs"]),
         "front_wrong_blade_count": wrong,
     })
     refined = None
@@ -213,10 +218,7 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
             "half_labels": rf["half"].summary(),
             "front_right_blade_count": rf["right"] / front_n if front_n else None,
             "front_right_blade_count_by_fill": {k: (r / n if n else None) for k, (n, r) in rf["by_fill"].items()},
-            "theta_error_mean_deg": float(np.mean(rf["errs"])) if rf["errs"] else None,
-            "theta_error_median_deg": float(np.median(rf["errs"])) if rf["errs"] else None,
-            "theta_error_p95_deg": float(np.percentile(rf["errs"], 95)) if rf["errs"] else None,
-            "theta_blades_measured": len(rf["errs"]),
+            **theta_stats(rf["errs"]),
         })
     out.update({
         "refined": refined,
