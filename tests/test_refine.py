@@ -161,3 +161,13 @@ def test_segment_refines_by_default_and_says_so(cli, tmp_path):
     assert list(a.labels) == list(b.labels) and np.allclose(a.scores, b.scores, atol=1e-3)
     assert not np.array_equal(a.masks, b.masks)
     assert _iou(a.union(), b.union()) > 0.85
+
+
+@pytest.mark.parametrize("code", [cv2.COLOR_BGR2GRAY, cv2.COLOR_BGR2BGRA])
+def test_grey_and_bgra_photos_are_refined_like_bgr(code):
+    img, truth = _blade_photo()
+    inst = _inst(cv2.dilate(truth.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0)
+    ref = R.load_refiner()
+    other = cv2.cvtColor(img, code)
+    want = R.refine_edges(ref, cv2.cvtColor(other, cv2.COLOR_GRAY2BGR) if other.ndim == 2 else img, inst)
+    assert np.array_equal(R.refine_edges(ref, other, inst).masks, want.masks)
