@@ -1,5 +1,5 @@
 """`wtinspect train-refiner`: train the edge refiner that `segment` runs on the segmenter's
-masks (docs/train.md)."""
+masks (docs/train-refiner.md)."""
 
 from __future__ import annotations
 

@@ -32,7 +32,10 @@ from wtcli.segment.model import MODELS_DIR
 BAND = 2  # px each side of the boundary decided again
 PATCH = 9  # the photo and mask seen around each pixel
 RING = (3, 7)  # "just outside": between these distances (px) from the mask
+# ``features`` layout: the photo patch (3 per pixel), the mask patch, the class, the mean colour
+# inside, the mean colour outside (3 each, last).
 N_FEATURES = 4 * PATCH * PATCH + len(LABELS) + 6
+MASK_CENTRE = 3 * PATCH * PATCH + PATCH * PATCH // 2  # the feature holding the mask at the pixel
 ARCH = "wtrefine-mlp-alpha"
 DEFAULT_REFINER = "wtseg-refine.pt"
 # Photos larger than this (longer side) are refined at this size, as ``predict`` segments
@@ -152,6 +155,8 @@ def refine_edges(refiner: Refiner, image_bgr: np.ndarray, inst: Instances, add_a
         # only what the refiner changed is scaled back: the rest keeps the photo's own masks
         masks = np.stack([(m | _resize_mask(d & ~s, W, H)) & ~_resize_mask(s & ~d, W, H)
                           for m, s, d in zip(inst.masks, small.masks, done.masks)])
+        empty = ~masks.reshape(len(masks), -1).any(axis=1)
+        masks[empty] = inst.masks[empty]
         return Instances(inst.labels, masks, inst.scores, inst.boxes)
     masks = inst.masks.copy()
     for i in range(len(inst)):

@@ -13,6 +13,7 @@ Two stages, both resumable:
 
 from __future__ import annotations
 
+import io
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -22,7 +23,7 @@ import numpy as np
 import torch
 
 from wtcli.errors import ConfigError, InputError, ModelError
-from wtcli.jsonio import document, write_json
+from wtcli.jsonio import atomic_write_bytes, document, write_json
 from wtcli.segment import refine as R
 from wtcli.segment.data import HELDOUT_SEED_BASE, TRAIN_SEED_BASE
 
@@ -95,9 +96,16 @@ def image_samples(image: np.ndarray, pred, truth, per_instance: int, rng: np.ran
     return np.concatenate(xs), np.concatenate(ys)
 
 
+def _write(path: Path, save: Callable[[io.BytesIO], None]) -> None:
+    """``save`` into memory, then onto ``path`` atomically: an interrupted run leaves no part
+    file or checkpoint half written."""
+    buf = io.BytesIO()
+    save(buf)
+    atomic_write_bytes(path, buf.getvalue())
+
+
 def make_data(cfg: RefinerConfig, progress: Callable[[dict[str, Any]], None] | None = None) -> list[Path]:
     """Stage 1: the data parts (made where missing)."""
-    from wtcli.jsonio import atomic_write_bytes
     from wtcli.segment.infer import load_model, segment_image
 
     folder = Path(cfg.out) / "data"
@@ -124,11 +132,7 @@ def make_data(cfg: RefinerConfig, progress: Callable[[dict[str, Any]], None] | N
             Y.append(y)
             if progress:
                 progress({"stage": "data", "done": i + 1, "total": cfg.images})
-        import io
-
-        buf = io.BytesIO()
-        np.savez(buf, X=np.concatenate(X), Y=np.concatenate(Y))
-        atomic_write_bytes(path, buf.getvalue())
+        _write(path, lambda buf: np.savez(buf, X=np.concatenate(X), Y=np.concatenate(Y)))
     return parts
 
 
@@ -209,15 +213,10 @@ def fit(cfg: RefinerConfig, X: np.ndarray, Y: np.ndarray,
                           "done": epoch * steps_per + b + 1, "total": cfg.epochs * steps_per,
                           "loss": loss.item()})
         history.append({"epoch": epoch + 1, **check()})
-        import io
-
-        from wtcli.jsonio import atomic_write_bytes
-
-        buf = io.BytesIO()
-        torch.save({"epoch": epoch + 1, "epochs": cfg.epochs, "state_dict": net.state_dict(), "optimizer": opt.state_dict(),
-                    "scheduler": sched.state_dict(), "history": history}, buf)
-        atomic_write_bytes(ckpt, buf.getvalue())
-    mask = X[val, 3 * R.PATCH * R.PATCH + R.PATCH * R.PATCH // 2] > 0  # the mask at each pixel
+        state = {"epoch": epoch + 1, "epochs": cfg.epochs, "state_dict": net.state_dict(),
+                 "optimizer": opt.state_dict(), "scheduler": sched.state_dict(), "history": history}
+        _write(ckpt, lambda buf: torch.save(state, buf))
+    mask = X[val, R.MASK_CENTRE] > 0  # the network's answer at each held-out pixel
     net.eval()
     return net, {"history": history, **check(), "train_pixels": int(len(train)),
                  "val_accuracy_unrefined": float((mask == Y[val]).mean())}
