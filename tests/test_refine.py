@@ -59,6 +59,24 @@ def test_features_shape_and_centre_pixel():
     assert np.isfinite(f).all() and np.abs(f).max() <= 1.0
 
 
+def test_local_colours_follow_the_background_along_the_blade():
+    img, truth = _blade_photo()
+    ramp = np.linspace(0.4, 1.0, img.shape[1])[None, :, None]  # the sky brightens to the right
+    img = np.where(truth[..., None], img, (img * ramp).astype(np.uint8))
+    (y0, x0), crop, m, px = R.instance_pixels(img, truth)
+    f = R.features(crop, m, "blade", px[:, 0], px[:, 1])
+    local_out = (f[:, R.LOCAL + 4:R.LOCAL + 7] + 1) / 2 * 255
+    share_in, share_out = f[:, R.LOCAL + 3], f[:, R.LOCAL + 7]
+    assert (share_in > 0).all() and (share_out > 0).all() and (share_in + share_out <= 1).all()
+    left, right = px[:, 1] + x0 < 80, px[:, 1] + x0 > 240
+    # near each pixel the ring's colour is the sky there, not the instance-wide mean
+    for side in (left, right):
+        x = int(np.median(px[side, 1] + x0))
+        sky = np.array([190, 160, 130]) * (0.4 + 0.6 * x / (img.shape[1] - 1))
+        assert np.abs(local_out[side].mean(axis=0) - sky).max() < 12
+    assert local_out[right, 0].mean() > local_out[left, 0].mean() + 60
+
+
 @pytest.mark.parametrize("change", ["dilate", "erode"])
 def test_shipped_refiner_moves_a_wrong_edge_to_the_blade(change):
     img, truth = _blade_photo(width=6)
@@ -102,6 +120,10 @@ def test_refiner_file_errors_name_the_file(tmp_path):
     torch.save({"arch": "wtseg-r18s-fpn128-p2", "state_dict": {}}, other)
     with pytest.raises(ModelError, match="other.pt: not refiner weights"):
         R.load_refiner(other)
+    earlier = tmp_path / "earlier.pt"
+    torch.save({"arch": "wtrefine-mlp-alpha", "state_dict": {}}, earlier)
+    with pytest.raises(ModelError, match="earlier.pt: not refiner weights.*train one anew"):
+        R.load_refiner(earlier)
     short = tmp_path / "short.pt"
     torch.save({"arch": R.ARCH, "state_dict": {"net.0.weight": torch.zeros(3, 3)}}, short)
     with pytest.raises(ModelError, match="short.pt: refiner weights do not fit"):
