@@ -77,6 +77,18 @@ def test_local_colours_follow_the_background_along_the_blade():
     assert local_out[right, 0].mean() > local_out[left, 0].mean() + 60
 
 
+def test_mirrored_features_are_those_of_the_mirrored_photo():
+    img, truth = _blade_photo()
+    (y0, x0), crop, m, px = R.instance_pixels(img, truth)
+    f = R.features(crop, m, "blade", px[:, 0], px[:, 1])
+    w = crop.shape[1]
+    g = R.features(crop[:, ::-1].copy(), m[:, ::-1].copy(), "blade", px[:, 0], w - 1 - px[:, 1])
+    assert np.allclose(R.mirrored(f), g, atol=1e-5)
+    assert np.array_equal(R.mirrored(R.mirrored(f)), f)
+    p = R.probability(R.load_refiner(), f)
+    assert p.shape == (len(px),) and ((p >= 0) & (p <= 1)).all()
+
+
 @pytest.mark.parametrize("change", ["dilate", "erode"])
 def test_shipped_refiner_moves_a_wrong_edge_to_the_blade(change):
     img, truth = _blade_photo(width=6)
@@ -84,7 +96,13 @@ def test_shipped_refiner_moves_a_wrong_edge_to_the_blade(change):
     wrong = (cv2.dilate if change == "dilate" else cv2.erode)(truth.astype(np.uint8), k) > 0
     out = R.refine_edges(R.load_refiner(), img, _inst(wrong))
     before, after = _iou(wrong, truth), _iou(out.masks[0], truth)
-    assert after > before + 0.1, (before, after)
+    # A blade pixel leaves its mask only where the refiner is sure (KEEP_AT, chosen for the
+    # real photos' generous masks), so a mask too wide gains less than one too thin, and more
+    # where pixels leave at 0.3 as tower and nacelle pixels do.
+    assert after > before + (0.08 if change == "dilate" else 0.3), (before, after)
+    if change == "dilate":
+        at_03 = R.refine_edges(R.load_refiner(), img, _inst(wrong), keep_at=0.3).masks[0]
+        assert _iou(at_03, truth) > before + 0.15
     # pixels farther than the band from the mask's boundary are not touched
     far = ~(cv2.dilate(wrong.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0)
     assert not out.masks[0][far].any()

@@ -170,6 +170,30 @@ def instance_pixels(img: np.ndarray, mask: np.ndarray, pad: int = PATCH + RING[1
     return (y0, x0), img[y0:y1, x0:x1], m, np.stack([by, bx], 1)
 
 
+_MIRROR = np.arange(PATCH * PATCH).reshape(PATCH, PATCH)[:, ::-1].ravel()
+
+
+def mirrored(f: np.ndarray) -> np.ndarray:
+    """``features`` of the same pixels in the photo mirrored left to right: the patches' columns
+    reversed; the class and the colour means (over symmetric windows) stay."""
+    k = PATCH * PATCH
+    g = f.copy()
+    g[:, :3 * k] = f[:, :3 * k].reshape(len(f), k, 3)[:, _MIRROR].reshape(len(f), -1)
+    g[:, 3 * k:4 * k] = f[:, 3 * k:4 * k][:, _MIRROR]
+    return g
+
+
+def probability(refiner: Refiner, f: np.ndarray) -> np.ndarray:
+    """The refiner's probability for ``features`` ``f``: the mean of its logits on the pixels
+    and on their mirror image, as the network looks at a photo and its mirror. A scene is
+    left-right symmetric, not up-down (sky above, light from above): on 100 development
+    renders blade / tower / nacelle IoU 0.818 / 0.876 / 0.813 alone, 0.821 / 0.879 / 0.816
+    with the mirror, 0.817 / 0.878 / 0.812 with the up-down flips as well."""
+    with torch.inference_mode():
+        lo = refiner(torch.from_numpy(np.concatenate([f, mirrored(f)])))
+    return torch.sigmoid(0.5 * (lo[:len(f)] + lo[len(f):])).numpy()
+
+
 def refine_edges(refiner: Refiner, image_bgr: np.ndarray, inst: Instances, add_at: float = ADD_AT,
                  keep_at: dict[str, float] | float | None = None,
                  max_size: int | None = REFINE_MAX_SIZE) -> Instances:
@@ -205,9 +229,7 @@ def refine_edges(refiner: Refiner, image_bgr: np.ndarray, inst: Instances, add_a
         (y0, x0), img, m, px = got
         if not len(px):
             continue
-        with torch.inference_mode():
-            p = torch.sigmoid(refiner(torch.from_numpy(features(img, m, inst.labels[i], px[:, 0], px[:, 1]))))
-        p = p.numpy()
+        p = probability(refiner, features(img, m, inst.labels[i], px[:, 0], px[:, 1]))
         new = m.copy()
         keep = keep_at[inst.labels[i]] if isinstance(keep_at, dict) else keep_at
         new[px[:, 0], px[:, 1]] = np.where(m[px[:, 0], px[:, 1]], p >= keep, p >= add_at)
