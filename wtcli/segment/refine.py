@@ -283,7 +283,7 @@ def load_refiner(path: str | Path | None = None) -> Refiner:
 
 
 def save_refiner(refiner: Refiner, path: str | Path, meta: dict[str, Any] | None = None) -> Path:
-    """{"arch", "hidden", "state_dict" (float32: the file is ~0.55 MB), "meta"}, atomically."""
+    """{"arch", "hidden", "state_dict" (float32: the file is ~0.65 MB), "meta"}, atomically."""
     import io
 
     from wtcli.jsonio import atomic_write_bytes
