@@ -100,28 +100,32 @@ def band(mask: np.ndarray, r: int = BAND) -> np.ndarray:
     return (cv2.dilate(m, k) > 0) & ~(cv2.erode(m, k) > 0)
 
 
-def _colour_means(img: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Mean colour (0..1) inside the mask (its core, when it has one) and in a ring just
-    outside it."""
+def _core(mask: np.ndarray) -> np.ndarray:
+    """The mask less its outermost pixels (the part's own colour, not an edge's mix), or the
+    whole mask when that leaves fewer than 4 pixels."""
+    core = cv2.erode(mask.astype(np.uint8), _disk(1)) > 0
+    return core if core.sum() >= 4 else mask.astype(bool)
+
+
+def _ring(mask: np.ndarray, r: tuple[int, int]) -> np.ndarray:
+    """Pixels between r[0] (exclusive) and r[1] px (disk) outside the mask."""
     m = mask.astype(np.uint8)
-    core = cv2.erode(m, _disk(1)) > 0
-    inside = img[core] if core.sum() >= 4 else img[mask]
-    ring = (cv2.dilate(m, _disk(RING[1])) > 0) & ~(cv2.dilate(m, _disk(RING[0])) > 0)
+    return (cv2.dilate(m, _disk(r[1])) > 0) & ~(cv2.dilate(m, _disk(r[0])) > 0)
+
+
+def _colour_means(img: np.ndarray, core: np.ndarray, ring: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean colour (0..1) of the mask's core and of the ring just outside it (the core's, if
+    the ring is empty)."""
+    inside = img[core]
     outside = img[ring] if ring.any() else inside
     return inside.mean(axis=0) / 255.0, outside.mean(axis=0) / 255.0
 
 
-def _local_means(img: np.ndarray, mask: np.ndarray, inside: np.ndarray, outside: np.ndarray,
-                 ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
-    """[N, 8]: at each pixel (ys, xs), the mean colour (-1..1) of the mask's core within
-    LOCAL_WIN and the share of the window that core fills, then the same for the ring
-    LOCAL_RING px outside the mask; a window without any falls back to ``inside`` /
-    ``outside`` (0..1) with share 0."""
-    m = mask.astype(np.uint8)
-    core = cv2.erode(m, _disk(1))
-    if core.sum() < 4:
-        core = m
-    ring = (cv2.dilate(m, _disk(LOCAL_RING[1])) > 0) & ~(cv2.dilate(m, _disk(LOCAL_RING[0])) > 0)
+def _local_means(img: np.ndarray, core: np.ndarray, ring: np.ndarray, inside: np.ndarray,
+                 outside: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
+    """[N, 8]: at each pixel (ys, xs), the mean colour (-1..1) of the mask's ``core`` within
+    LOCAL_WIN and the share of the window that core fills, then the same for ``ring``; a
+    window without any falls back to ``inside`` / ``outside`` (0..1) with share 0."""
     f = img.astype(np.float32) / 255.0
     out = []
     for sel, fallback in ((core.astype(np.float32), inside), (ring.astype(np.float32), outside)):
@@ -146,10 +150,11 @@ def features(img: np.ndarray, mask: np.ndarray, label: str, ys: np.ndarray, xs: 
     n = len(ys)
     pix = ip[yy, xx].reshape(n, -1).astype(np.float32) / 127.5 - 1.0
     msk = mp[yy, xx].reshape(n, -1).astype(np.float32) - 0.5
-    inside, outside = _colour_means(img, mask)
+    core = _core(mask)
+    inside, outside = _colour_means(img, core, _ring(mask, RING))
     cls = np.zeros(len(LABELS), np.float32)
     cls[LABELS.index(label)] = 1.0
-    local = _local_means(img, mask, inside, outside, ys, xs)
+    local = _local_means(img, core, _ring(mask, LOCAL_RING), inside, outside, ys, xs)
     means = np.concatenate([inside * 2 - 1, outside * 2 - 1]).astype(np.float32)
     return np.concatenate([pix, msk, np.broadcast_to(cls, (n, len(cls))), local,
                            np.broadcast_to(means, (n, 6))], axis=1)
