@@ -149,7 +149,8 @@ def test_refiner_file_errors_name_the_file(tmp_path):
 
 
 def test_train_refiner_tiny_run_resume_and_reuse(tmp_path):
-    cfg = RefinerConfig(out=str(tmp_path / "run"), images=4, epochs=1, eval_count=1, threads=1)
+    cfg = RefinerConfig(out=str(tmp_path / "run"), images=4, epochs=1, eval_count=1, threads=1,
+                        hidden=(32, 16))
     seen = []
     s = train_refiner(cfg, progress=seen.append)
     stages = [r["stage"] for r in seen]
@@ -161,6 +162,7 @@ def test_train_refiner_tiny_run_resume_and_reuse(tmp_path):
     assert set(m["evaluation"]) == {"unrefined", "refined"}
     ref = R.load_refiner(run / "refiner.pt")
     assert ref.meta["images"] == 4
+    assert (ref.net[0].out_features, ref.net[2].out_features) == (32, 16)  # --hidden, kept in the file
     with pytest.raises(InputError, match="holds a run already"):
         train_refiner(cfg)
     # resumed: the data on disk is used (no render), the finished pass is not redone
@@ -172,6 +174,9 @@ def test_train_refiner_tiny_run_resume_and_reuse(tmp_path):
     cfg.epochs = 2
     with pytest.raises(ConfigError, match="resume it with those, not 2"):
         train_refiner(cfg)
+    cfg.epochs, cfg.hidden = 1, (64, 16)
+    with pytest.raises(ConfigError, match="a run of --hidden 32,16; resume it with those, not 64,16"):
+        train_refiner(cfg)
 
 
 def test_train_refiner_cli_errors(cli, tmp_path):
@@ -179,6 +184,10 @@ def test_train_refiner_cli_errors(cli, tmp_path):
     assert res.exit_code == ExitCode.CONFIG and "--images 0" in res.stderr
     res = cli("train-refiner", "--seed", "7", "--out", str(tmp_path / "r"))
     assert res.exit_code == ExitCode.CONFIG and "--seed 7" in res.stderr
+    for bad in ("512", "512,x", "512,0"):
+        res = cli("train-refiner", "--hidden", bad, "--out", str(tmp_path / "r"))
+        assert res.exit_code == ExitCode.CONFIG and f"--hidden {bad}" in res.stderr, res.stderr
+    assert not (tmp_path / "r").exists()  # refused before anything was made
 
 
 def test_segment_refines_by_default_and_says_so(cli, tmp_path):

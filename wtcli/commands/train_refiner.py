@@ -14,14 +14,16 @@ def train_refiner(
     out: Path = typer.Option(Path("runs/refiner"), "--out", "-o",
                              help="Run folder: data/ (resumable), last.ckpt, refiner.pt, metrics.json."),
     images: int = typer.Option(1200, "--images", "-n",
-                               help="Renders segmented for training pixels (about 1 s each on "
-                                    "2 cores; ~3 GB of memory per 1000 in the fit)."),
+                               help="Renders segmented for training pixels (about 2 s each on "
+                                    "2 cores; ~5 GB of memory per 1000 in the fit)."),
     model: Optional[Path] = typer.Option(None, "--model", "-m",
                                          help="Segmenter whose masks it learns to correct "
                                               "(default: models/wtseg-r18s.pt)."),
     seed: int = typer.Option(0, "--seed", help="Scenes, sampling and initialisation (0-4)."),
     epochs: int = typer.Option(5, "--epochs", help="Passes over the training pixels."),
     lr: float = typer.Option(2e-3, "--lr", help="Peak AdamW learning rate (one-cycle)."),
+    hidden: str = typer.Option("256,128", "--hidden", metavar="A,B",
+                               help="Widths of the MLP's two hidden layers (stored in the file)."),
     eval_count: int = typer.Option(16, "--eval-count",
                                    help="Held-out renders evaluated at the end (0: none)."),
     threads: Optional[int] = typer.Option(None, "--threads", min=1, help="CPU threads for torch."),
@@ -33,12 +35,18 @@ def train_refiner(
     from rich.table import Table
 
     from wtcli.console import count_bar, err_console
+    from wtcli.errors import ConfigError
     from wtcli.jsonio import document, dumps
     from wtcli.segment.train_refine import REFINER_SCHEMA, RefinerConfig
     from wtcli.segment.train_refine import train_refiner as run
 
+    try:
+        widths = tuple(int(v) for v in hidden.split(","))
+    except ValueError:
+        raise ConfigError(f"--hidden {hidden}: two layer widths, e.g. 256,128") from None
     cfg = RefinerConfig(out=str(out), images=images, model=str(model) if model else None, seed=seed,
-                        epochs=epochs, lr=lr, eval_count=eval_count, threads=threads, resume=resume)
+                        epochs=epochs, lr=lr, eval_count=eval_count, threads=threads, resume=resume,
+                        hidden=widths)
     with ExitStack() as stack:
         bars: dict[str, object] = {}
 

@@ -46,6 +46,7 @@ class RefinerConfig:
     batch_size: int = 4096
     lr: float = 2e-3
     per_instance: int = 1500  # band pixels drawn per instance at most
+    hidden: tuple[int, int] = (256, 128)  # the MLP's two hidden layers
     eval_count: int = 16
     threads: int | None = None
     resume: bool = False
@@ -54,6 +55,8 @@ class RefinerConfig:
         for name in ("images", "epochs", "batch_size", "per_instance"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"--{name.replace('_', '-')} {getattr(self, name)}: must be at least 1")
+        if len(self.hidden) != 2 or min(self.hidden) < 1:
+            raise ConfigError(f"--hidden {','.join(map(str, self.hidden))}: two layer widths of at least 1")
         if not 0 <= self.seed < 5:
             raise ConfigError(f"--seed {self.seed}: must be 0-4 (each seed has its own 100 000 scenes)")
         if self.images > 100_000:
@@ -137,19 +140,34 @@ def make_data(cfg: RefinerConfig, progress: Callable[[dict[str, Any]], None] | N
 
 
 def _load_parts(parts: list[Path]) -> tuple[np.ndarray, np.ndarray]:
-    X, Y = [], []
+    """All parts in one array, filled part by part: concatenating a list of them would hold
+    every pixel twice at the peak (~10 GB more at 2400 images)."""
+    def bad(p: Path, e: Exception) -> InputError:
+        return InputError(f"{p}: unreadable training data ({e.__class__.__name__}); delete it "
+                          "and run again with --resume to make it anew")
+
+    sizes = []
     for p in parts:
         try:
-            with np.load(p) as d:
-                X.append(d["X"])
-                Y.append(d["Y"])
+            with np.load(p) as d:  # the labels only: one byte per pixel
+                sizes.append(len(d["Y"]))
         except Exception as e:  # noqa: BLE001 - a damaged part: say which and how to redo it
-            raise InputError(f"{p}: unreadable training data ({e.__class__.__name__}); delete it "
-                             "and run again with --resume to make it anew") from None
-        if X[-1].ndim != 2 or X[-1].shape[1] != R.N_FEATURES or len(X[-1]) != len(Y[-1]):
+            raise bad(p, e) from None
+    X = np.empty((sum(sizes), R.N_FEATURES), np.float16)
+    Y = np.empty(sum(sizes), bool)
+    at = 0
+    for p, n in zip(parts, sizes):
+        try:
+            with np.load(p) as d:
+                x, y = d["X"], d["Y"]
+        except Exception as e:  # noqa: BLE001
+            raise bad(p, e) from None
+        if x.ndim != 2 or x.shape[1] != R.N_FEATURES or len(x) != n or len(y) != n:
             raise InputError(f"{p}: training data of another feature layout; delete {p.parent} "
                              "and run again")
-    return np.concatenate(X), np.concatenate(Y)
+        X[at:at + n], Y[at:at + n] = x, y
+        at += n
+    return X, Y
 
 
 def fit(cfg: RefinerConfig, X: np.ndarray, Y: np.ndarray,
@@ -163,7 +181,7 @@ def fit(cfg: RefinerConfig, X: np.ndarray, Y: np.ndarray,
     val, train = np.sort(order[:nv]), order[nv:]
     xv = torch.from_numpy(X[val].astype(np.float32))
     yv = torch.from_numpy(Y[val].astype(np.float32))
-    net = R.Refiner()
+    net = R.Refiner(tuple(cfg.hidden))
     opt = torch.optim.AdamW(net.parameters(), cfg.lr, weight_decay=1e-4)
     steps_per = max(1, len(train) // cfg.batch_size)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, cfg.lr, total_steps=cfg.epochs * steps_per,
@@ -177,6 +195,9 @@ def fit(cfg: RefinerConfig, X: np.ndarray, Y: np.ndarray,
             if int(state.get("epochs", cfg.epochs)) != cfg.epochs:
                 raise ConfigError(f"{ckpt}: a run of --epochs {state['epochs']} (its learning-rate "
                                   f"schedule); resume it with those, not {cfg.epochs}")
+            if tuple(state.get("hidden", cfg.hidden)) != tuple(cfg.hidden):
+                raise ConfigError(f"{ckpt}: a run of --hidden {','.join(map(str, state['hidden']))}; "
+                                  f"resume it with those, not {','.join(map(str, cfg.hidden))}")
             net.load_state_dict(state["state_dict"])
             opt.load_state_dict(state["optimizer"])
             sched.load_state_dict(state["scheduler"])
@@ -213,8 +234,9 @@ def fit(cfg: RefinerConfig, X: np.ndarray, Y: np.ndarray,
                           "done": epoch * steps_per + b + 1, "total": cfg.epochs * steps_per,
                           "loss": loss.item()})
         history.append({"epoch": epoch + 1, **check()})
-        state = {"epoch": epoch + 1, "epochs": cfg.epochs, "state_dict": net.state_dict(),
-                 "optimizer": opt.state_dict(), "scheduler": sched.state_dict(), "history": history}
+        state = {"epoch": epoch + 1, "epochs": cfg.epochs, "hidden": list(cfg.hidden),
+                 "state_dict": net.state_dict(), "optimizer": opt.state_dict(),
+                 "scheduler": sched.state_dict(), "history": history}
         _write(ckpt, lambda buf: torch.save(state, buf))
     mask = X[val, R.MASK_CENTRE] > 0  # the network's answer at each held-out pixel
     net.eval()
