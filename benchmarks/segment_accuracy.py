@@ -462,7 +462,7 @@ def main(argv: list[str] | None = None) -> dict:
                     # the network's working size (shorter side, longer side at most)
                     "working_size": [int(model.transform.min_size[0]), int(model.transform.max_size)]}
     result["precision"] = model.precision
-    refiner = None if a.no_refine else load_refiner(a.refiner)
+    refiner = None if a.no_refine else load_refiner(a.refiner, model.precision)
     result["refiner"] = None if refiner is None else str(resolve_refiner(a.refiner))
     if not a.dev:
         log(f"speed ({a.speed_runs} runs each)")

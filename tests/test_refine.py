@@ -89,6 +89,19 @@ def test_mirrored_features_are_those_of_the_mirrored_photo():
     assert p.shape == (len(px),) and ((p >= 0) & (p <= 1)).all()
 
 
+def test_refiner_runs_in_the_precision_asked():
+    img, truth = _blade_photo()
+    _, crop, m, px = R.instance_pixels(img, truth)
+    f = R.features(crop, m, "blade", px[:, 0], px[:, 1])
+    f32, b16 = R.load_refiner(None, "fp32"), R.load_refiner(None, "bf16")
+    assert (f32.precision, b16.precision) == ("fp32", "bf16")
+    p32, p16 = R.probability(f32, f), R.probability(b16, f)
+    assert p16.dtype == np.float32 and not np.array_equal(p32, p16)  # bf16 ran: its rounding shows
+    assert np.abs(p32 - p16).max() < 0.1 and ((p32 >= 0.5) != (p16 >= 0.5)).mean() < 0.01
+    with pytest.raises(ModelError, match="unknown precision"):
+        R.load_refiner(None, "fp8")
+
+
 @pytest.mark.parametrize("change", ["dilate", "erode"])
 def test_shipped_refiner_moves_a_wrong_edge_to_the_blade(change):
     img, truth = _blade_photo(width=6)
@@ -98,8 +111,10 @@ def test_shipped_refiner_moves_a_wrong_edge_to_the_blade(change):
     before, after = _iou(wrong, truth), _iou(out.masks[0], truth)
     # A blade pixel leaves its mask only where the refiner is sure (KEEP_AT, chosen for the
     # real photos' generous masks), so a mask too wide gains less than one too thin, and more
-    # where pixels leave at 0.3 as tower and nacelle pixels do.
-    assert after > before + (0.08 if change == "dilate" else 0.3), (before, after)
+    # where pixels leave at 0.3 as tower and nacelle pixels do. (Shipped refiner: 0.720 -> 0.823
+    # too wide, 0.871 at 0.3; 0.617 -> 0.891 too thin, where session 22's narrower one gave 0.961
+    # on this flat, noiseless blade and is worse on renders and equal on photos.)
+    assert after > before + (0.08 if change == "dilate" else 0.25), (before, after)
     if change == "dilate":
         at_03 = R.refine_edges(R.load_refiner(), img, _inst(wrong), keep_at=0.3).masks[0]
         assert _iou(at_03, truth) > before + 0.15

@@ -60,7 +60,7 @@ def segment(
     _, files = find_images(path, recursive)  # errors (no such path, empty folder) before loading
     weights = resolve_weights(model)
     net = load_model(weights, device, precision)
-    edges = load_refiner(refiner) if refine else None
+    edges = load_refiner(refiner, net.precision) if refine else None
 
     def run(img):
         inst = predict(net, img, score_threshold=score_threshold, max_size=max_size, flip=flip)

@@ -13,7 +13,7 @@ import typer
 def train_refiner(
     out: Path = typer.Option(Path("runs/refiner"), "--out", "-o",
                              help="Run folder: data/ (resumable), last.ckpt, refiner.pt, metrics.json."),
-    images: int = typer.Option(1200, "--images", "-n",
+    images: int = typer.Option(2400, "--images", "-n",
                                help="Renders segmented for training pixels (about 2 s each on "
                                     "2 cores; ~5 GB of memory per 1000 in the fit)."),
     model: Optional[Path] = typer.Option(None, "--model", "-m",
@@ -22,7 +22,7 @@ def train_refiner(
     seed: int = typer.Option(0, "--seed", help="Scenes, sampling and initialisation (0-4)."),
     epochs: int = typer.Option(5, "--epochs", help="Passes over the training pixels."),
     lr: float = typer.Option(2e-3, "--lr", help="Peak AdamW learning rate (one-cycle)."),
-    hidden: str = typer.Option("256,128", "--hidden", metavar="A,B",
+    hidden: str = typer.Option("512,256", "--hidden", metavar="A,B",
                                help="Widths of the MLP's two hidden layers (stored in the file)."),
     eval_count: int = typer.Option(16, "--eval-count",
                                    help="Held-out renders evaluated at the end (0: none)."),
@@ -43,7 +43,7 @@ def train_refiner(
     try:
         widths = tuple(int(v) for v in hidden.split(","))
     except ValueError:
-        raise ConfigError(f"--hidden {hidden}: two layer widths, e.g. 256,128") from None
+        raise ConfigError(f"--hidden {hidden}: two layer widths, e.g. 512,256") from None
     cfg = RefinerConfig(out=str(out), images=images, model=str(model) if model else None, seed=seed,
                         epochs=epochs, lr=lr, eval_count=eval_count, threads=threads, resume=resume,
                         hidden=widths)

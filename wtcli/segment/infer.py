@@ -395,7 +395,8 @@ def segment_image(image_bgr: np.ndarray, model: torch.nn.Module | None = None,
     if refine:
         from wtcli.segment.refine import load_refiner, refine_edges
 
-        inst = refine_edges(load_refiner(refiner), image_bgr, inst)
+        edges = load_refiner(refiner, getattr(model, "precision", None))  # as the network runs
+        inst = refine_edges(edges, image_bgr, inst)
     if not len(inst) or floor >= score_threshold:
         return inst
     return inst[(inst.scores >= score_threshold) | (inst.labels == "blade")]

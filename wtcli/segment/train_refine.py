@@ -39,14 +39,14 @@ REFINER_SCHEMA = "wtinspect.train_refiner"
 @dataclass
 class RefinerConfig:
     out: str = "runs/refiner"
-    images: int = 1200
+    images: int = 2400
     model: str | None = None  # the segmenter whose masks are refined; default the shipped one
     seed: int = 0
     epochs: int = 5
     batch_size: int = 4096
     lr: float = 2e-3
     per_instance: int = 1500  # band pixels drawn per instance at most
-    hidden: tuple[int, int] = (256, 128)  # the MLP's two hidden layers
+    hidden: tuple[int, int] = (512, 256)  # the MLP's two hidden layers
     eval_count: int = 16
     threads: int | None = None
     resume: bool = False
