@@ -141,7 +141,7 @@ def make_data(cfg: RefinerConfig, progress: Callable[[dict[str, Any]], None] | N
 
 def _load_parts(parts: list[Path]) -> tuple[np.ndarray, np.ndarray]:
     """All parts in one array, filled part by part: concatenating a list of them would hold
-    every pixel twice at the peak (~10 GB more at 2400 images)."""
+    every pixel twice at the peak (about 12 GB more at 2 400 renders)."""
     def bad(p: Path, e: Exception) -> InputError:
         return InputError(f"{p}: unreadable training data ({e.__class__.__name__}); delete it "
                           "and run again with --resume to make it anew")
