@@ -12,7 +12,7 @@ import torch
 from wtcli.errors import ConfigError, ExitCode, InputError, ModelError
 from wtcli.masks import Instances, write_instances
 from wtcli.segment import data as D
-from wtcli.segment.model import build_model, load_weights
+from wtcli.segment.model import average_weights, build_model, load_weights, save_weights
 from wtcli.segment.train import (SYNTH_STRETCH, TrainConfig, _batches, _seed_all, export_checkpoint,
                                  lr_factor, train)
 
@@ -219,3 +219,61 @@ def test_progress_on_a_terminal_is_a_bar(monkeypatch):
     out = buf.getvalue()
     assert "train" in out and "55%" in out and "step 550 loss 0.800" in out
     assert "train: step" not in out  # no log lines on a terminal
+
+
+def test_fine_lr_mult_moves_the_fine_branch_that_much_faster(tmp_path):
+    # AdamW's first step moves each weight with a gradient by the learning rate itself, so the
+    # fine branch's last conv (started at zero) moves by --lr x the multiplier, the rest by --lr.
+    _seed_all(5)
+    init = build_model().state_dict()
+    train(_tiny(tmp_path, iterations=1, eval_count=0, seed=5, lr=1e-3, fine_lr_mult=10.0))
+    state = torch.load(tmp_path / "run" / "last.ckpt", weights_only=True)
+    after = state["state_dict"]
+    fine = float((after["backbone.fine.2.weight"] - init["backbone.fine.2.weight"]).abs().max())
+    head = float((after["roi_heads.box_head.fc6.weight"] - init["roi_heads.box_head.fc6.weight"]).abs().max())
+    assert fine == pytest.approx(1e-2, rel=0.05) and head == pytest.approx(1e-3, rel=0.05)
+    assert [g["lr_mult"] for g in state["optimizer"]["param_groups"]] == [1.0, 10.0]
+    # Resuming with another multiplier would silently change the run: refused, naming it.
+    with pytest.raises(ConfigError, match="--fine-lr-mult 10"):
+        train(_tiny(tmp_path, iterations=2, eval_count=0, seed=5, resume=True))
+    with pytest.raises(ConfigError, match="fine-lr-mult"):
+        train(_tiny(tmp_path, fine_lr_mult=0.0))
+
+
+def test_average_weights_is_the_mean_and_says_of_what(tmp_path):
+    models = []
+    for seed in (1, 2):
+        _seed_all(seed)
+        models.append(build_model())
+        save_weights(models[-1], tmp_path / f"w{seed}.pt", meta={"seed": seed})
+    average_weights([tmp_path / "w1.pt", tmp_path / "w2.pt"], tmp_path / "mean.pt")
+    m = build_model()
+    meta = load_weights(m, tmp_path / "mean.pt")
+    assert meta["weight_average"] == [str(tmp_path / "w1.pt"), str(tmp_path / "w2.pt")]
+    a, b, got = (x.state_dict() for x in (*models, m))
+    k = "roi_heads.box_head.fc6.weight"
+    want = ((a[k].half().float() + b[k].half().float()) / 2).half().float()
+    assert torch.equal(got[k], want) and not torch.equal(got[k], a[k].half().float())
+    with pytest.raises(ModelError, match="nothing.pt"):
+        average_weights([tmp_path / "w1.pt", tmp_path / "nothing.pt"], tmp_path / "x.pt")
+
+
+def test_average_with_a_bad_file_fails_before_training(tmp_path):
+    with pytest.raises(ModelError, match="nothing.pt"):
+        train(_tiny(tmp_path, average_with=str(tmp_path / "nothing.pt")))
+    assert not (tmp_path / "run" / "last.ckpt").exists()
+
+
+def test_tiny_run_averaged_with_its_init(tmp_path):
+    _seed_all(7)
+    save_weights(build_model(), tmp_path / "init.pt")
+    s = train(_tiny(tmp_path, iterations=1, eval_count=0, init=str(tmp_path / "init.pt"),
+                    average_with=str(tmp_path / "init.pt")))
+    run = tmp_path / "run"
+    assert s["average"] == str(run / "model-average.pt")
+    w = [build_model() for _ in range(3)]
+    for m, p in zip(w, (tmp_path / "init.pt", run / "model.pt", run / "model-average.pt")):
+        load_weights(m, p)
+    k = "roi_heads.box_head.fc6.weight"
+    i, t, avg = (m.state_dict()[k] for m in w)
+    assert torch.allclose(avg, (i + t) / 2, atol=1e-3) and not torch.equal(i, t)

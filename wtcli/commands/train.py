@@ -49,6 +49,13 @@ def train(
     precision: str = typer.Option("auto", "--precision",
                                   help="auto | fp32 | bf16. auto: the backbone in bfloat16 on a "
                                        "CPU that does bf16 natively (faster steps), else fp32."),
+    fine_lr_mult: float = typer.Option(1.0, "--fine-lr-mult",
+                                       help="The mask head's stride-4 branch learns at this times "
+                                            "--lr (run 19: 10)."),
+    average_with: Optional[Path] = typer.Option(None, "--average-with",
+                                                help="Also write OUT/model-average.pt: the run's "
+                                                     "weights averaged with these (e.g. the --init "
+                                                     "file)."),
     resume: bool = typer.Option(False, "--resume", help="Continue from OUT/last.ckpt."),
     json_out: bool = typer.Option(False, "--json", help="Print the run summary JSON on stdout."),
 ) -> None:
@@ -86,7 +93,8 @@ def train(
                       checkpoint_every=checkpoint_every, eval_count=eval_count,
                       val=str(val) if val else None, device=device, workers=workers, threads=threads,
                       augment=not no_augment, stops=stops, resume=resume, train_sizes=train_sizes,
-                      precision=precision)
+                      precision=precision, fine_lr_mult=fine_lr_mult,
+                      average_with=str(average_with) if average_with else None)
     report = _Report(iterations, max_minutes, checkpoint_every)
     try:
         summary = run_training(cfg, progress=report.step)
@@ -104,6 +112,8 @@ def train(
     err_console.print(f"{summary['iterations']} iterations in {summary['train_seconds']:.0f} s on "
                       f"{summary['device']} ({summary['precision']}); weights -> {summary['weights']}, "
                       f"resume from {summary['checkpoint']}")
+    if summary.get("average"):
+        err_console.print(f"averaged with {average_with} -> {summary['average']}")
     if json_out:
         typer.echo(dumps(document(TRAIN_SCHEMA, 1, summary)))
 
