@@ -214,21 +214,18 @@ def average_weights(paths: list[str | Path], out: str | Path) -> Path:
     and were better than either run on the real photos (models/README.md)."""
     if len(paths) < 2:
         raise ModelError("expected at least two weights files to average")
-    states, metas = [], []
+    models, metas = [], []
     for path in paths:
-        model = build_model()
-        metas.append(load_weights(model, path))  # checks each file as segment would
-        states.append(state_dict_fp16(model))
-    mean = {k: (torch.stack([s[k].float() for s in states]).mean(0).to(torch.float16)
-                if v.is_floating_point() else v) for k, v in states[0].items()}
+        models.append(build_model())
+        metas.append(load_weights(models[-1], path))  # checks each file as segment would
+    mean = models[0]
+    with torch.no_grad():  # state_dict() tensors share the parameters' storage
+        for k, v in mean.state_dict().items():
+            if v.is_floating_point():
+                v.copy_(torch.stack([m.state_dict()[k] for m in models]).mean(0))
     meta = dict(metas[0])
     meta["weight_average"] = [str(p) for p in paths]
-    from wtcli.jsonio import atomic_write_bytes
-    import io
-
-    buf = io.BytesIO()
-    torch.save({"arch": ARCH, "state_dict": mean, "meta": meta}, buf)
-    return atomic_write_bytes(out, buf.getvalue())
+    return save_weights(mean, out, meta)
 
 
 def resolve_weights(path: str | Path | None = None) -> Path:
