@@ -112,8 +112,9 @@ def test_shipped_refiner_moves_a_wrong_edge_to_the_blade(change):
     # A blade pixel leaves its mask only where the refiner is sure (KEEP_AT, chosen for the
     # real photos' generous masks), so a mask too wide gains less than one too thin, and more
     # where pixels leave at 0.3 as tower and nacelle pixels do. (Shipped refiner: 0.720 -> 0.851
-    # too wide with blade pixels leaving below 0.2 (0.823 at session 24's 0.1), 0.871 at 0.3; 0.617 -> 0.891 too thin, where session 22's narrower one gave 0.961
-    # on this flat, noiseless blade and is worse on renders and equal on photos.)
+    # too wide with blade pixels leaving below 0.2, 0.823 at the 0.1 of sessions 21-24, 0.871 at
+    # 0.3; 0.617 -> 0.891 too thin, where session 22's narrower one gave 0.961 on this flat,
+    # noiseless blade and is worse on renders and equal on photos.)
     assert after > before + (0.08 if change == "dilate" else 0.25), (before, after)
     if change == "dilate":
         at_03 = R.refine_edges(R.load_refiner(), img, _inst(wrong), keep_at=0.3).masks[0]
