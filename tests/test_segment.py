@@ -521,9 +521,9 @@ def test_turbine_groups_join_touching_boxes_only():
 
 def test_second_look_recrops_a_small_turbine_and_pastes_it_back(monkeypatch):
     """A distant turbine (first-pass blade and tower, 40 px in a 300 x 400 photo) is segmented
-    again on a crop with the photo's aspect around it; the crop's instances replace it, at the
-    right place; one cut by the crop's edge and one off the turbine are dropped; a large
-    turbine is left as it was."""
+    again on a crop with the photo's aspect around it, no smaller than ZOOM_MIN_CROP; the
+    crop's instances replace it, at the right place; one cut by the crop's edge and one off the
+    turbine are dropped; a large turbine is left as it was."""
     H, W = 300, 400
     first = np.zeros((3, H, W), bool)
     first[0, 100:120, 200:203] = True  # a small turbine: a thin blade ...
@@ -548,7 +548,8 @@ def test_second_look_recrops_a_small_turbine_and_pastes_it_back(monkeypatch):
     out = infer.second_look(object(), np.zeros((H, W, 3), np.uint8), inst, 0.2)
     assert len(crops) == 1
     h, w = crops[0]
-    assert abs(w / h - W / H) < 0.02 and 80 <= h <= 120  # (40 px + 2 x 0.6 x 40) at the photo's aspect
+    # 40 px + 2 x 0.6 x 40 = 88 px, raised to ZOOM_MIN_CROP of the frame, at the photo's aspect
+    assert abs(w / h - W / H) < 0.02 and abs(h - infer.ZOOM_MIN_CROP * H) <= 1
     assert sorted(out.labels.tolist()) == ["blade", "tower", "tower"]
     assert np.array_equal(out.masks[out.scores == 0.95][0], first[2])
     blade = out.masks[out.labels == "blade"][0]
