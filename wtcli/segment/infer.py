@@ -46,8 +46,8 @@ ZOOM_PAD = 0.6
 # tall, magnified 5-10x to the network's size, is blurrier than anything it was trained on, and
 # its faint blades were missed. On 100 development renders (session 26, refined) blade IoU /
 # AP50 with no floor, 0.3, 0.45, 0.6, 0.7, 0.76 of the frame: 0.836 / 0.762, 0.837 / 0.776,
-# 0.840 / 0.780, 0.844 / 0.798, 0.845 / 0.789, 0.846 / 0.789 (0.85 with crops up to 0.9 of the
-# frame: 0.847 / 0.768, nacelle IoU 0.826 -> 0.819); the 38 real photos' blade IoU 0.753 ->
+# 0.840 / 0.780, 0.844 / 0.798, 0.845 / 0.789, 0.846 / 0.789 (a floor of 0.85 with crops allowed
+# up to 0.9: 0.847 / 0.768, nacelle IoU 0.826 -> 0.819); the 38 real photos' blade IoU 0.753 ->
 # 0.754 (0.7), tower 0.802 -> 0.804. Each look costs one pass whatever the crop's size.
 ZOOM_MIN_CROP = 0.75
 ZOOM_MAX = 3  # the largest this many small turbines (each look costs a pass of the network)
