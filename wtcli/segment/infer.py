@@ -344,7 +344,7 @@ def second_look(model: torch.nn.Module, image_bgr: np.ndarray, inst: Instances,
     labels, masks, scores, boxes = [], [], [], []
     for _, g, x0, y0, x1, y1 in small[:ZOOM_MAX]:
         ch = max(max(y1 - y0, (x1 - x0) * H / W) * (1 + 2 * ZOOM_PAD), ZOOM_MIN_CROP * H)
-        if ch >= 0.8 * H or ch < 16:  # hardly a closer look, or nothing to look at
+        if ch >= 0.8 * H or ch < 16:  # hardly a closer look, or a photo too small to crop
             continue
         cw = ch * W / H
         X0 = int(round(np.clip((x0 + x1 - cw) / 2, 0, W - cw)))
