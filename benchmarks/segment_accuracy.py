@@ -35,7 +35,10 @@
 
 4. Edge refinement (``wtcli.segment.refine``, session 21; ``--no-refine`` skips it): every figure
    of the second look again with the instances' edges refined, as ``segment`` gives them
-   (``synthetic.refined``, ``real.refined``), and the speed with it (``speed.ours_refined_...``).
+   (``synthetic.refined``, ``real.refined``), and the speed with it (``speed.ours_refined_...``;
+   ``speed.ours_segment_images_per_s``: all that ``segment`` runs by default, the second look
+   and the refiner, on the speed render and on a distant one, with its ratio to the stock
+   network in ``speedup_vs_stock_segment``).
 
 Results are printed and written as JSON (``--out``, default benchmarks/results/segment_accuracy.json).
 
@@ -281,6 +284,11 @@ def speed(model, runs: int, with_stock: bool, fp32_model=None, refiner=None) -> 
     if refiner is not None:  # the network, then the edge refiner: what `segment --no-zoom` runs
         out["ours_refined_images_per_s"] = clock(
             lambda: refine_edges(refiner, img, predict(model, img, score_threshold=0.5)))
+        # Everything `segment` runs by default: the candidate floor, the second look, the refiner.
+        out["ours_segment_images_per_s"] = {
+            name: clock(lambda im=im: refine_edges(refiner, im, second_look(
+                model, im, predict(model, im, CANDIDATE_FLOOR), CANDIDATE_FLOOR)))
+            for name, im in (("this render", img), ("a distant render", far))}
     # Without the mirrored masks (segment --no-flip), for the record.
     out["ours_no_flip_images_per_s"] = clock(lambda: predict(model, img, score_threshold=0.5, flip=False))
     if fp32_model is not None:  # the same network in float32, for the record
@@ -300,6 +308,9 @@ def speed(model, runs: int, with_stock: bool, fp32_model=None, refiner=None) -> 
         out["speedup_vs_stock"] = ours / out["stock_r50_fpn_images_per_s"]
         if "ours_refined_images_per_s" in out:
             out["speedup_vs_stock_refined"] = out["ours_refined_images_per_s"] / out["stock_r50_fpn_images_per_s"]
+        if "ours_segment_images_per_s" in out:
+            out["speedup_vs_stock_segment"] = {name: v / out["stock_r50_fpn_images_per_s"]
+                                               for name, v in out["ours_segment_images_per_s"].items()}
         out["speedup_vs_stock_no_flip"] = out["ours_no_flip_images_per_s"] / out["stock_r50_fpn_images_per_s"]
         if "ours_fp32_images_per_s" in out:
             out["speedup_vs_stock_fp32"] = out["ours_fp32_images_per_s"] / out["stock_r50_fpn_images_per_s"]
@@ -456,14 +467,17 @@ def main(argv: list[str] | None = None) -> dict:
     def log(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
 
+    def shown(path: Path) -> str:  # the repository's own files by relative path, as in the results file
+        return str(path.relative_to(ROOT) if path.is_relative_to(ROOT) else path)
+
     weights = resolve_weights(a.model)
     model = load_model(weights, "cpu", a.precision)
-    result: dict = {"model": str(weights.relative_to(ROOT) if weights.is_relative_to(ROOT) else weights),
+    result: dict = {"model": shown(weights),
                     # the network's working size (shorter side, longer side at most)
                     "working_size": [int(model.transform.min_size[0]), int(model.transform.max_size)]}
     result["precision"] = model.precision
     refiner = None if a.no_refine else load_refiner(a.refiner, model.precision)
-    result["refiner"] = None if refiner is None else str(resolve_refiner(a.refiner))
+    result["refiner"] = None if refiner is None else shown(resolve_refiner(a.refiner))
     if not a.dev:
         log(f"speed ({a.speed_runs} runs each)")
         result["speed"] = speed(model, a.speed_runs, not a.no_stock,
