@@ -666,14 +666,21 @@ def test_flip_gives_the_mirror_image_the_mirrored_answer():
     pass left out) breaks it; the shifts of ``mirror_boxes`` and ``unmirror_boxes`` keep it
     within a pixel. Not every edge: where an edge is ambiguous (the tower's top under the
     nacelle) the two directions may keep different proposals (the tower's box, up to 7.6 px apart
-    with session 18's weights), so every box but one must agree to the pixel."""
+    with session 18's weights), so every box but one must agree to the pixel. Instances are
+    paired by mask, not by rank: two scoring within 0.001 (the nacelle and a blade tip, session
+    29's weights) may swap places between the two."""
     from wtcli.synth.render import render_sample
 
     model = infer.load_model(None, "cpu")
     s = render_sample(7_000_002, width=640, height=480, view="front")
     a = infer.predict(model, s.image, 0.3)
     b = infer.predict(model, np.ascontiguousarray(s.image[:, ::-1]), 0.3)
-    assert len(a) >= 4 and list(a.labels) == list(b.labels)
+    assert len(a) >= 4 and len(a) == len(b)
+    pair = [int(np.argmax([mask_iou(a.masks[i], m[:, ::-1]) if label == a.labels[i] else -1.0
+                           for label, m in zip(b.labels, b.masks)])) for i in range(len(a))]
+    assert sorted(pair) == list(range(len(b)))  # one to one
+    b = b[np.array(pair)]
+    assert list(a.labels) == list(b.labels)
     assert np.allclose(a.scores, b.scores, atol=0.02)
     back = b.boxes.copy()
     back[:, [0, 2]] = 640 - b.boxes[:, [2, 0]]
