@@ -110,15 +110,15 @@ def test_shipped_refiner_moves_a_wrong_edge_to_the_blade(change):
     out = R.refine_edges(R.load_refiner(), img, _inst(wrong))
     before, after = _iou(wrong, truth), _iou(out.masks[0], truth)
     # A blade pixel leaves its mask only where the refiner is sure (KEEP_AT, chosen for the
-    # real photos' generous masks), so a mask too wide gains less than one too thin, and more
-    # where pixels leave at 0.3 as tower and nacelle pixels do. (Shipped refiner: 0.720 -> 0.851
-    # too wide with blade pixels leaving below 0.2, 0.823 at the 0.1 of sessions 21-24, 0.871 at
-    # 0.3; 0.617 -> 0.891 too thin, where session 22's narrower one gave 0.961 on this flat,
+    # real photos' generous masks), so a mask too wide gains less than one too thin, and less
+    # still where blade pixels leave only below 0.2 (sessions 25-30) or 0.1 (sessions 21-24).
+    # (Shipped refiner: 0.720 -> 0.871 too wide at the shipped 0.3, 0.851 at 0.2, 0.823 at 0.1;
+    # 0.617 -> 0.891 too thin, where session 22's narrower one gave 0.961 on this flat,
     # noiseless blade and is worse on renders and equal on photos.)
-    assert after > before + (0.08 if change == "dilate" else 0.25), (before, after)
+    assert after > before + (0.12 if change == "dilate" else 0.25), (before, after)
     if change == "dilate":
-        at_03 = R.refine_edges(R.load_refiner(), img, _inst(wrong), keep_at=0.3).masks[0]
-        assert _iou(at_03, truth) > before + 0.15
+        at_02 = R.refine_edges(R.load_refiner(), img, _inst(wrong), keep_at=0.2).masks[0]
+        assert before + 0.08 < _iou(at_02, truth) < _iou(out.masks[0], truth)
     # pixels farther than the band from the mask's boundary are not touched
     far = ~(cv2.dilate(wrong.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0)
     assert not out.masks[0][far].any()
