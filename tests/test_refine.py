@@ -178,6 +178,7 @@ def test_train_refiner_tiny_run_resume_and_reuse(tmp_path):
     assert set(m["evaluation"]) == {"unrefined", "refined"}
     ref = R.load_refiner(run / "refiner.pt")
     assert ref.meta["images"] == 4
+    assert ref.meta["segmenter"] == "shipped" and isinstance(ref.meta["segmenter_run"], int)
     assert (ref.net[0].out_features, ref.net[2].out_features) == (32, 16)  # --hidden, kept in the file
     with pytest.raises(InputError, match="holds a run already"):
         train_refiner(cfg)

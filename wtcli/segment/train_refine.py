@@ -262,6 +262,18 @@ def evaluate(cfg: RefinerConfig, refiner: R.Refiner) -> dict[str, Any]:
     return {"unrefined": plain.summary(), "refined": refined.summary()}
 
 
+def _segmenter_run(model: str | None) -> dict[str, Any]:
+    """Which run of the segmenter the masks came from, as its weights file says ("shipped"
+    names a different file after every new segmenter); empty where the file says none."""
+    from wtcli.segment.model import resolve_weights
+
+    try:
+        meta = torch.load(resolve_weights(model), map_location="cpu", weights_only=True).get("meta", {})
+    except Exception:  # noqa: BLE001 - the fit is done; a label must not lose it
+        return {}
+    return {f"segmenter_{k}": meta[k] for k in ("run", "seed", "iterations") if k in meta}
+
+
 def train_refiner(cfg: RefinerConfig, progress: Callable[[dict[str, Any]], None] | None = None
                   ) -> dict[str, Any]:
     """Both stages (resuming what is on disk with ``resume``); the summary in OUT/metrics.json."""
@@ -278,7 +290,8 @@ def train_refiner(cfg: RefinerConfig, progress: Callable[[dict[str, Any]], None]
     net, stats = fit(cfg, X, Y, progress)
     t2 = time.monotonic()
     meta = {"images": cfg.images, "seed": cfg.seed, "epochs": cfg.epochs,
-            "segmenter": str(cfg.model or "shipped"), "val_accuracy": round(stats["val_accuracy"], 4)}
+            "segmenter": str(cfg.model or "shipped"), **_segmenter_run(cfg.model),
+            "val_accuracy": round(stats["val_accuracy"], 4)}
     R.save_refiner(net, out / "refiner.pt", meta)
     summary = {"arch": R.ARCH, "config": asdict(cfg), "data_seconds": t1 - t0, "fit_seconds": t2 - t1,
                "pixels": int(len(X)), **stats,
