@@ -1,6 +1,7 @@
 """The edge refiner: band and features, what it does to masks (the shipped weights fix a mask a
 pixel too wide or too thin on a clean edge, keep far pixels, work on large photos), its file's
-errors, and `train-refiner` (a tiny run, resume, a run folder not reused by mistake)."""
+errors, and `train-refiner` (a tiny run, resume, a run folder not reused by mistake, a pixel
+budget)."""
 
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ import torch
 from wtcli.errors import ConfigError, ExitCode, InputError, ModelError
 from wtcli.masks import Instances
 from wtcli.segment import refine as R
-from wtcli.segment.train_refine import RefinerConfig, train_refiner
+from wtcli.segment.train_refine import RefinerConfig, _load_parts, fit, train_refiner
 
 
 def _iou(a, b):
@@ -197,11 +198,54 @@ def test_train_refiner_tiny_run_resume_and_reuse(tmp_path):
         train_refiner(cfg)
 
 
+def _parts(tmp_path, sizes):
+    """Data parts whose pixel j of part k has features k, j, j, ... (exact in float16 below
+    2048)."""
+    paths = []
+    for k, n in enumerate(sizes):
+        x = np.repeat(np.arange(n, dtype=np.float32)[:, None], R.N_FEATURES, 1)
+        x[:, 0] = k
+        paths.append(tmp_path / f"part-{k:04d}.npz")
+        np.savez(paths[-1], X=x.astype(np.float16), Y=np.arange(n) % 2 == 0)
+    return paths
+
+
+def test_max_pixels_draws_the_same_share_of_every_part(tmp_path):
+    parts = _parts(tmp_path, (600, 300, 900))
+    X, Y, made = _load_parts(parts)
+    assert made == len(X) == 1800 and (X[:, 1] == X[:, -1]).all()
+    X, Y, made = _load_parts(parts, max_pixels=600, seed=1)
+    assert made == 1800 and len(X) == len(Y) == 600
+    part, j = X[:, 0].astype(int), X[:, 1].astype(int)
+    assert np.bincount(part).tolist() == [200, 100, 300]  # a third of each, not the first 600
+    assert (Y == (j % 2 == 0)).all()  # each pixel keeps its own target
+    assert all(len(set(j[part == k])) == (part == k).sum() for k in range(3))  # none twice
+    again, _, _ = _load_parts(parts, max_pixels=600, seed=1)
+    other, _, _ = _load_parts(parts, max_pixels=600, seed=2)
+    assert (again == X).all() and not (other == X).all()  # the seed decides which
+    assert len(_load_parts(parts, max_pixels=5000)[0]) == 1800  # a budget above all: all
+
+
+def test_resume_refuses_another_pixel_budget(tmp_path):
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(25_000, R.N_FEATURES)).astype(np.float16)
+    Y = X[:, R.MASK_CENTRE] > 0
+    cfg = RefinerConfig(out=str(tmp_path), epochs=1, hidden=(8, 4), threads=1)
+    fit(cfg, X, Y)
+    cfg.resume, cfg.max_pixels = True, 20_000
+    with pytest.raises(ConfigError, match="a run of every pixel; resume it with that, not --max-pixels 20000"):
+        fit(cfg, X, Y)
+    cfg.max_pixels = None
+    fit(cfg, X, Y)  # the same budget resumes (its one pass is done)
+
+
 def test_train_refiner_cli_errors(cli, tmp_path):
     res = cli("train-refiner", "--images", "0", "--out", str(tmp_path / "r"))
     assert res.exit_code == ExitCode.CONFIG and "--images 0" in res.stderr
     res = cli("train-refiner", "--seed", "7", "--out", str(tmp_path / "r"))
     assert res.exit_code == ExitCode.CONFIG and "--seed 7" in res.stderr
+    res = cli("train-refiner", "--max-pixels", "0", "--out", str(tmp_path / "r"))
+    assert res.exit_code == ExitCode.CONFIG and "--max-pixels 0" in res.stderr
     for bad in ("512", "512,x", "512,0"):
         res = cli("train-refiner", "--hidden", bad, "--out", str(tmp_path / "r"))
         assert res.exit_code == ExitCode.CONFIG and f"--hidden {bad}" in res.stderr, res.stderr

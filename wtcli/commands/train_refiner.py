@@ -15,12 +15,16 @@ def train_refiner(
                              help="Run folder: data/ (resumable), last.ckpt, refiner.pt, metrics.json."),
     images: int = typer.Option(2400, "--images", "-n",
                                help="Renders segmented for training pixels (about 2 s each on "
-                                    "2 cores; ~5 GB of memory per 1000 in the fit)."),
+                                    "2 cores; ~5 GB of memory per 1000 in the fit, or "
+                                    "--max-pixels)."),
     model: Optional[Path] = typer.Option(None, "--model", "-m",
                                          help="Segmenter whose masks it learns to correct "
                                               "(default: models/wtseg-r18s.pt)."),
     seed: int = typer.Option(0, "--seed", help="Scenes, sampling and initialisation (0-4)."),
     epochs: int = typer.Option(5, "--epochs", help="Passes over the training pixels."),
+    max_pixels: Optional[int] = typer.Option(None, "--max-pixels",
+                                             help="Fit at most this many pixels, the same share "
+                                                  "of every render's (memory; default all)."),
     lr: float = typer.Option(2e-3, "--lr", help="Peak AdamW learning rate (one-cycle)."),
     hidden: str = typer.Option("512,256", "--hidden", metavar="A,B",
                                help="Widths of the MLP's two hidden layers (stored in the file)."),
@@ -45,8 +49,8 @@ def train_refiner(
     except ValueError:
         raise ConfigError(f"--hidden {hidden}: two layer widths, e.g. 512,256") from None
     cfg = RefinerConfig(out=str(out), images=images, model=str(model) if model else None, seed=seed,
-                        epochs=epochs, lr=lr, eval_count=eval_count, threads=threads, resume=resume,
-                        hidden=widths)
+                        epochs=epochs, max_pixels=max_pixels, lr=lr, eval_count=eval_count,
+                        threads=threads, resume=resume, hidden=widths)
     with ExitStack() as stack:
         bars: dict[str, object] = {}
 
@@ -71,7 +75,8 @@ def train_refiner(
             a, b = ev["unrefined"].get(f"{label}_mask_iou"), ev["refined"].get(f"{label}_mask_iou")
             table.add_row(label, "-" if a is None else f"{a:.3f}", "-" if b is None else f"{b:.3f}")
         err_console.print(table)
-    err_console.print(f"{summary['pixels']} band pixels from {images} renders "
+    kept = (f" (of {summary['pixels_made']})" if summary["pixels_made"] > summary["pixels"] else "")
+    err_console.print(f"{summary['pixels']} band pixels{kept} from {images} renders "
                       f"({summary['data_seconds']:.0f} s), fitted in {summary['fit_seconds']:.0f} s: "
                       f"pixel accuracy {summary['val_accuracy_unrefined']:.3f} -> "
                       f"{summary['val_accuracy']:.3f}; weights -> {summary['weights']}", soft_wrap=True)

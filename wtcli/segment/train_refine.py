@@ -46,14 +46,15 @@ class RefinerConfig:
     batch_size: int = 4096
     lr: float = 2e-3
     per_instance: int = 1500  # band pixels drawn per instance at most
+    max_pixels: int | None = None  # the fit keeps at most this many, drawn evenly from every part
     hidden: tuple[int, int] = (512, 256)  # the MLP's two hidden layers
     eval_count: int = 16
     threads: int | None = None
     resume: bool = False
 
     def check(self) -> None:
-        for name in ("images", "epochs", "batch_size", "per_instance"):
-            if getattr(self, name) < 1:
+        for name in ("images", "epochs", "batch_size", "per_instance", "max_pixels"):
+            if getattr(self, name) is not None and getattr(self, name) < 1:
                 raise ConfigError(f"--{name.replace('_', '-')} {getattr(self, name)}: must be at least 1")
         if len(self.hidden) != 2 or min(self.hidden) < 1:
             raise ConfigError(f"--hidden {','.join(map(str, self.hidden))}: two layer widths of at least 1")
@@ -139,9 +140,14 @@ def make_data(cfg: RefinerConfig, progress: Callable[[dict[str, Any]], None] | N
     return parts
 
 
-def _load_parts(parts: list[Path]) -> tuple[np.ndarray, np.ndarray]:
-    """All parts in one array, filled part by part: concatenating a list of them would hold
-    every pixel twice at the peak (about 12 GB more at 2 400 renders)."""
+def _load_parts(parts: list[Path], max_pixels: int | None = None, seed: int = 0
+                ) -> tuple[np.ndarray, np.ndarray, int]:
+    """(X, Y, pixels on disk): all parts in one array, filled part by part (concatenating a list
+    of them would hold every pixel twice at the peak, about 12 GB more at 2 400 renders). With
+    ``max_pixels``, each part keeps the same share of its pixels, drawn by ``seed``: more renders
+    in the same memory. Neighbouring pixels of one render teach much the same thing: fitted
+    twice as long on the same 2 400 renders, band pixels right rose 0.899 -> 0.906 but blade IoU
+    on 200 development renders fell 0.8597 -> 0.8581."""
     def bad(p: Path, e: Exception) -> InputError:
         return InputError(f"{p}: unreadable training data ({e.__class__.__name__}); delete it "
                           "and run again with --resume to make it anew")
@@ -153,10 +159,13 @@ def _load_parts(parts: list[Path]) -> tuple[np.ndarray, np.ndarray]:
                 sizes.append(len(d["Y"]))
         except Exception as e:  # noqa: BLE001 - a damaged part: say which and how to redo it
             raise bad(p, e) from None
-    X = np.empty((sum(sizes), R.N_FEATURES), np.float16)
-    Y = np.empty(sum(sizes), bool)
+    made = sum(sizes)
+    share = min(1.0, max_pixels / made) if max_pixels and made else 1.0
+    keep = [round(n * share) for n in sizes]
+    X = np.empty((sum(keep), R.N_FEATURES), np.float16)
+    Y = np.empty(sum(keep), bool)
     at = 0
-    for p, n in zip(parts, sizes):
+    for k, (p, n, nk) in enumerate(zip(parts, sizes, keep)):
         try:
             with np.load(p) as d:
                 x, y = d["X"], d["Y"]
@@ -165,9 +174,12 @@ def _load_parts(parts: list[Path]) -> tuple[np.ndarray, np.ndarray]:
         if x.ndim != 2 or x.shape[1] != R.N_FEATURES or len(x) != n or len(y) != n:
             raise InputError(f"{p}: training data of another feature layout; delete {p.parent} "
                              "and run again")
-        X[at:at + n], Y[at:at + n] = x, y
-        at += n
-    return X, Y
+        if nk < n:
+            rows = np.sort(np.random.default_rng([seed, 1_000_000 + k]).choice(n, nk, replace=False))
+            x, y = x[rows], y[rows]
+        X[at:at + nk], Y[at:at + nk] = x, y
+        at += nk
+    return X, Y, made
 
 
 def fit(cfg: RefinerConfig, X: np.ndarray, Y: np.ndarray,
@@ -195,6 +207,10 @@ def fit(cfg: RefinerConfig, X: np.ndarray, Y: np.ndarray,
             if int(state.get("epochs", cfg.epochs)) != cfg.epochs:
                 raise ConfigError(f"{ckpt}: a run of --epochs {state['epochs']} (its learning-rate "
                                   f"schedule); resume it with those, not {cfg.epochs}")
+            if state.get("max_pixels") != cfg.max_pixels:
+                said = lambda v: f"--max-pixels {v}" if v else "every pixel"  # noqa: E731
+                raise ConfigError(f"{ckpt}: a run of {said(state.get('max_pixels'))}; resume it "
+                                  f"with that, not {said(cfg.max_pixels)}")
             if tuple(state.get("hidden", cfg.hidden)) != tuple(cfg.hidden):
                 raise ConfigError(f"{ckpt}: a run of --hidden {','.join(map(str, state['hidden']))}; "
                                   f"resume it with those, not {','.join(map(str, cfg.hidden))}")
@@ -235,6 +251,7 @@ def fit(cfg: RefinerConfig, X: np.ndarray, Y: np.ndarray,
                           "loss": loss.item()})
         history.append({"epoch": epoch + 1, **check()})
         state = {"epoch": epoch + 1, "epochs": cfg.epochs, "hidden": list(cfg.hidden),
+                 "max_pixels": cfg.max_pixels,
                  "state_dict": net.state_dict(), "optimizer": opt.state_dict(),
                  "scheduler": sched.state_dict(), "history": history}
         _write(ckpt, lambda buf: torch.save(state, buf))
@@ -286,15 +303,15 @@ def train_refiner(cfg: RefinerConfig, progress: Callable[[dict[str, Any]], None]
     t0 = time.monotonic()
     parts = make_data(cfg, progress)
     t1 = time.monotonic()
-    X, Y = _load_parts(parts)
+    X, Y, made = _load_parts(parts, cfg.max_pixels, cfg.seed)
     net, stats = fit(cfg, X, Y, progress)
     t2 = time.monotonic()
-    meta = {"images": cfg.images, "seed": cfg.seed, "epochs": cfg.epochs,
+    meta = {"images": cfg.images, "seed": cfg.seed, "epochs": cfg.epochs, "pixels": int(len(X)),
             "segmenter": str(cfg.model or "shipped"), **_segmenter_run(cfg.model),
             "val_accuracy": round(stats["val_accuracy"], 4)}
     R.save_refiner(net, out / "refiner.pt", meta)
     summary = {"arch": R.ARCH, "config": asdict(cfg), "data_seconds": t1 - t0, "fit_seconds": t2 - t1,
-               "pixels": int(len(X)), **stats,
+               "pixels": int(len(X)), "pixels_made": int(made), **stats,
                "evaluation": evaluate(cfg, net) if cfg.eval_count else {},
                "weights": str(out / "refiner.pt"), "checkpoint": str(out / "last.ckpt")}
     write_json(out / "metrics.json", document(REFINER_SCHEMA, 1, summary))
