@@ -237,6 +237,9 @@ def test_resume_refuses_another_pixel_budget(tmp_path):
         fit(cfg, X, Y)
     cfg.max_pixels = None
     fit(cfg, X, Y)  # the same budget resumes (its one pass is done)
+    tiny = RefinerConfig(out=str(tmp_path / "tiny"), epochs=1, hidden=(8, 4), max_pixels=100)
+    with pytest.raises(InputError, match="only 100 training pixels.*a larger --max-pixels"):
+        fit(tiny, X[:100], Y[:100])
 
 
 def test_train_refiner_cli_errors(cli, tmp_path):

@@ -6,9 +6,10 @@ Two stages, both resumable:
    segmenter as ``segment`` runs it; every instance's boundary band gives training pixels
    (features, and whether the true mask of the instance's class covers the pixel). Written
    as OUT/data/part-NNNN.npz, PART images each; a resumed run skips the parts on disk.
-2. fit: the MLP trained on them (AdamW, one-cycle schedule, ``epochs`` passes), checkpointed
-   after each pass to OUT/last.ckpt; then OUT/refiner.pt and OUT/metrics.json, with mask IoU
-   before and after refinement on ``eval_count`` held-out renders.
+2. fit: the MLP trained on them (at most ``max_pixels``, the same share of every part's; AdamW,
+   one-cycle schedule, ``epochs`` passes), checkpointed after each pass to OUT/last.ckpt; then
+   OUT/refiner.pt and OUT/metrics.json, with mask IoU before and after refinement on
+   ``eval_count`` held-out renders.
 """
 
 from __future__ import annotations
@@ -186,7 +187,8 @@ def fit(cfg: RefinerConfig, X: np.ndarray, Y: np.ndarray,
         progress: Callable[[dict[str, Any]], None] | None = None) -> tuple[R.Refiner, dict[str, Any]]:
     """Stage 2: the MLP trained on (X, Y); resumes from OUT/last.ckpt after a whole pass."""
     if len(X) < 2 * VAL_SAMPLES // 10:
-        raise InputError(f"only {len(X)} training pixels: segment more images (--images)")
+        more = " or a larger --max-pixels" if cfg.max_pixels else ""
+        raise InputError(f"only {len(X)} training pixels: segment more images (--images){more}")
     torch.manual_seed(cfg.seed)
     order = np.random.default_rng(cfg.seed).permutation(len(X))
     nv = min(VAL_SAMPLES, len(X) // 10)
