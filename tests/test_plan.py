@@ -1035,3 +1035,24 @@ def test_site_queries_far_outside_the_grid():
     s = ts[0].surface_samples(2.0)
     cov = measure_coverage(s, CAM, far, np.repeat(np.eye(3)[None], len(far), 0), 2.0)
     assert not cov.covered.any()
+
+
+# ---- a tower wider than the nacelle's standoff ------------------------------------------------------
+def _wide_tower_mission(radius: float) -> Mission:
+    """The failing case of a property run: a wide tower reaches into the nacelle's nominal
+    standoff, the gimbal stops at -60 deg (no top views), safe distance 5.36 m."""
+    t = make_turbine(az=90.0, tower_base_radius=radius, tower_top_radius=radius)
+    return Mission((t,), CAM, fleet=Fleet(gimbal_pitch_max_deg=30, gimbal_pitch_min_deg=-60),
+                   settings=Settings(safe_distance_m=5.36, min_side_coverage=0.0,
+                                     coverage_spacing_m=2.0))
+
+
+def test_wide_tower_backs_the_nacelle_stations_off_instead_of_crashing():
+    plan = plan_mission(_wide_tower_mission(5.0))
+    assert plan.summary["per_component"]["T1/nacelle"]["photos"] > 0
+    assert_safe(plan, 5.36)
+
+
+def test_nacelle_with_no_possible_station_is_refused_by_name():
+    with pytest.raises(PlanError, match=r"T1 nacelle: no photo station .* mission.inspect_nacelle: false"):
+        plan_mission(_wide_tower_mission(8.0))

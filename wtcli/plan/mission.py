@@ -121,13 +121,28 @@ def turbine_chunks(t: Turbine, site: Site, pp: PassParams, mission: Mission,
                                       (split or {}).get(k, set())))
         if mission.settings.inspect_nacelle:
             chunks.append(nacelle_chunk(t, site, pp))
+            _need_stations(chunks[-1], pp, "inspect_nacelle")
         if mission.settings.inspect_tower:
+            # the overview photo always has a station, so some chunk before the tower has one
+            last = next(c for c in reversed(chunks) if c.wps)
             chunks.append(tower_chunk(t, site, pp, mission.settings.tower_columns,
-                                      start_near=chunks[-1].end))
+                                      start_near=last.end))
+            _need_stations(chunks[-1], pp, "inspect_tower")
     except _Blocked as e:
         raise PlanError(f"turbine {t.id}: {e} keeping {pp.required:g} m (safe distance + tracking "
                         "margin); lower the margin or check the turbine sizes") from None
     return [c for c in chunks if c.wps]
+
+
+def _need_stations(chunk: Chunk, pp: PassParams, key: str) -> None:
+    """A component asked for but left without a single photo station is refused by name."""
+    if any(w.photo for w in chunk.wps):
+        return
+    raise PlanError(f"turbine {chunk.turbine} {chunk.name}: no photo station keeps "
+                    f"{pp.required:g} m (safe distance + tracking margin) from every part, "
+                    f"{pp.min_altitude:g} m above the ground and within {pp.gimbal_text()} "
+                    f"at up to {pp.max_standoff:.1f} m (the GSD's reach); check the turbine "
+                    f"sizes, or set mission.{key}: false")
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

@@ -558,6 +558,23 @@ def _filter_stations(site: Site, pp: PassParams, pos: np.ndarray,
     return ok
 
 
+def _back_off(site: Site, pp: PassParams, pos: np.ndarray, fwd: np.ndarray) -> np.ndarray:
+    """Stations too close to a part moved back along their line of sight, up to the farthest
+    standoff that still gives the GSD (``pp.max_standoff``), in 0.5 m steps: a tower wider
+    than the nacelle, or a large hub, reaches into the nacelle's nominal standoff."""
+    pos = np.array(pos, float)
+    bad = site.clearance(pos, pp.required) < pp.required
+    extra = 0.5
+    while bad.any() and pp.standoff + extra <= pp.max_standoff:
+        trial = pos[bad] - fwd[bad] * extra
+        ok = site.clearance(trial, pp.required) >= pp.required
+        idx = np.nonzero(bad)[0][ok]
+        pos[idx] = trial[ok]
+        bad[idx] = False
+        extra += 0.5
+    return pos
+
+
 def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams) -> Chunk:
     chunk = Chunk(turbine.id, "nacelle")
     a = turbine.axis
@@ -580,6 +597,7 @@ def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams) -> Chunk:
     for i, (comp, pos, fwd) in enumerate(passes):
         if i == 2:
             pos, fwd = pos[::-1], fwd[::-1]  # right side rear -> front
+        pos = _back_off(site, pp, pos, fwd)
         keep = _filter_stations(site, pp, pos, fwd)
         if (~keep).any():
             aimless = int((~pp.aim_ok(fwd)).sum())
