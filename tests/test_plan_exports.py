@@ -183,3 +183,119 @@ def test_real_plan_exports_parse(tmp_path):
 def test_exports_need_a_site_origin(tmp_path):
     with pytest.raises(ConfigError, match="site.origin"):
         export_all(small_plan(origin=None), tmp_path)
+
+
+# ---- exact WGS84 positions on a wide site ---------------------------------------------------------
+def _textbook_enu_to_llh(enu: np.ndarray, origin: dict) -> np.ndarray:
+    """ENU -> ECEF -> geodetic written independently of wtcli.plan.geodesy: the ECEF of the origin
+    from the prime-vertical radius, the ENU rotation, then Heikkinen's closed form (Zhu 1993)."""
+    a, f = 6378137.0, 1 / 298.257223563
+    b = a * (1 - f)
+    e2 = 1 - (b / a) ** 2
+    ep2 = (a / b) ** 2 - 1
+    la0, lo0, h0 = np.radians(origin["lat"]), np.radians(origin["lon"]), origin["alt"]
+    n0 = a / np.sqrt(1 - e2 * np.sin(la0) ** 2)
+    x0 = np.array([(n0 + h0) * np.cos(la0) * np.cos(lo0), (n0 + h0) * np.cos(la0) * np.sin(lo0),
+                   (n0 * (1 - e2) + h0) * np.sin(la0)])
+    out = []
+    for e, n, u in enu:
+        dx = -np.sin(lo0) * e - np.sin(la0) * np.cos(lo0) * n + np.cos(la0) * np.cos(lo0) * u
+        dy = np.cos(lo0) * e - np.sin(la0) * np.sin(lo0) * n + np.cos(la0) * np.sin(lo0) * u
+        dz = np.cos(la0) * n + np.sin(la0) * u
+        x, y, z = x0 + [dx, dy, dz]
+        p = np.hypot(x, y)
+        F = 54 * b * b * z * z
+        G = p * p + (1 - e2) * z * z - e2 * (a * a - b * b)
+        c = e2 * e2 * F * p * p / G ** 3
+        s = np.cbrt(1 + c + np.sqrt(c * c + 2 * c))
+        P = F / (3 * (s + 1 / s + 1) ** 2 * G * G)
+        Q = np.sqrt(1 + 2 * e2 * e2 * P)
+        r0 = -P * e2 * p / (1 + Q) + np.sqrt(a * a / 2 * (1 + 1 / Q) - P * (1 - e2) * z * z
+                                             / (Q * (1 + Q)) - P * p * p / 2)
+        U = np.hypot(p - e2 * r0, z)
+        V = np.sqrt((p - e2 * r0) ** 2 + (1 - e2) * z * z)
+        z0 = b * b * z / (a * V)
+        out.append([np.degrees(np.arctan((z + ep2 * z0) / p)), np.degrees(np.arctan2(y, x)),
+                    U * (1 - b * b / (a * V))])
+    return np.array(out)
+
+
+def _metres_apart(llh1: np.ndarray, llh2: np.ndarray) -> np.ndarray:
+    """Horizontal and vertical distances (m) between [lat, lon, h] rows, small offsets."""
+    lat = np.radians(llh2[:, 0])
+    dn = np.radians(llh1[:, 0] - llh2[:, 0]) * 6.3674e6
+    de = np.radians(llh1[:, 1] - llh2[:, 1]) * 6.3781e6 * np.cos(lat)
+    return np.stack([np.hypot(dn, de), np.abs(llh1[:, 2] - llh2[:, 2])], axis=1)
+
+
+WIDE_ORIGIN = {"lat": 47.2, "lon": 8.3, "alt": 480.0}
+
+
+def wide_plan() -> Plan:
+    """One sortie over a 10 km site: launch 5.4 km out, waypoints up to 9.9 km from the origin."""
+    p = small_plan(WIDE_ORIGIN)
+    r = p.routes[0]
+    launch = [3000.0, -4500.0, -2.3]
+    pos = np.array([launch, [3000, -4500, 8], [-7000, 7000, 150], [-7000, 7002, 152],
+                    [3000, -4500, 8], launch])
+    n = len(pos)
+    route = Route("UAV1", t=np.arange(n) * 600.0, pos=pos, speed=np.r_[0, 3.0, 12, 2, 12, 3],
+                  yaw_deg=np.r_[0, 0, 315, 315, 0, 0], gimbal_pitch_deg=np.r_[0, 0, -20, -20, 0, 0],
+                  photo=np.array([0, 0, 1, 1, 0, 0], bool), component=r.component[:n])
+    return Plan(p.turbines, p.camera, [route], 3.0, 1.5, WIDE_ORIGIN, {})
+
+
+def test_exports_agree_with_an_independent_wgs84_conversion_on_a_10_km_site(tmp_path):
+    plan = wide_plan()
+    r = plan.routes[0]
+    truth = _textbook_enu_to_llh(r.pos, WIDE_ORIGIN)
+    files = export_all(plan, tmp_path, stem="w")
+    rows = parse_wpl((tmp_path / "w_UAV1_s1.waypoints").read_text())
+    home = np.array(rows[0]["params"][4:7])
+    wp = np.array([row["params"][4:7] for row in rows[1:] if row["command"] in (22, 16, 21)])
+    got = np.vstack([home, wp])
+    got[1:, 2] += home[2]  # frame 3: relative to home -> AMSL
+    want = truth[[0, 1, 2, 3, 4, 5]]
+    assert got.shape == want.shape
+    err = _metres_apart(got, want)
+    assert err.max() < 0.1, err
+    doc = json.loads((tmp_path / "w_UAV1_s1.plan").read_text())
+    qh = np.array(doc["mission"]["plannedHomePosition"])
+    q = np.array([it["params"][4:7] for it in doc["mission"]["items"] if it["command"] in (22, 16, 21)])
+    q[:, 2] += qh[2]
+    assert _metres_apart(np.vstack([qh, q]), want).max() < 0.1
+    gj = json.loads((tmp_path / "w.geojson").read_text())
+    assert "above mean sea level" in gj["altitude_reference"]
+    line = next(f for f in gj["features"] if f["properties"]["kind"] == "route")
+    g = np.array(line["geometry"]["coordinates"])[:, [1, 0, 2]]
+    assert _metres_apart(g, truth).max() < 0.1
+    assert len(files) == 3
+
+
+def test_relative_altitude_is_the_height_difference_not_the_enu_z_difference():
+    """Regression: a waypoint 5 km from home at ENU z 80 m used to be exported 80 m above home,
+    but the ellipsoid curves away below the ENU plane by d^2/2R = 1.96 m, so the point is 81.96 m
+    above home's height: the drone flew 1.96 m lower than planned."""
+    plan = small_plan()
+    r = plan.routes[0]
+    r.pos[2] = [5000.0, 0.0, 80.0]
+    r.pos[0] = r.pos[5] = [0.0, 0.0, 0.0]
+    r.pos[1] = r.pos[4] = [0.0, 0.0, 10.0]
+    items, home = mission_items(plan, r, 0, 5)
+    wp = [it for it in items if it.command == 16]
+    assert wp[0].params[6] == pytest.approx(80 + 5000 ** 2 / (2 * 6.38e6), abs=0.01)
+    truth = _textbook_enu_to_llh(r.pos[2:3], ORIGIN)[0]
+    assert wp[0].params[6] + home[2] == pytest.approx(truth[2], abs=0.01)
+
+
+def test_a_site_wider_than_the_limit_is_refused_naming_the_key(tmp_path):
+    plan = small_plan()
+    plan.turbines[0] = Turbine.with_rotor_azimuth(90, id="T9", base=(10_500, 0, 0), hub_height=80,
+                                                  rotor_diameter=90, yaw_deg=180)
+    with pytest.raises(ConfigError, match=r"turbines\[0\] \(T9\)\.position: 10\.5 km from site\.origin"):
+        export_all(plan, tmp_path)
+    plan = wide_plan()
+    plan.routes[0].pos[2] = [-8000, 8000, 150]
+    with pytest.raises(ConfigError, match="UAV1 route point 2"):
+        export_all(plan, tmp_path)
+    assert not list(tmp_path.iterdir())

@@ -1,9 +1,11 @@
 """Mission exports of a Plan: QGroundControl ``.plan``, MAVLink ``QGC WPL 110`` and GeoJSON.
 
 Field-level notes: /work/shared/formats.md (mirrored in docs/plan.md). One file per UAV and
-sortie (a battery swap ends a sortie: a mission file is flown on one battery). Waypoints are in
-frame 3 (altitude relative to the launch point, i.e. home); home is the launch point in frame 0
-(AMSL). Commands used:
+sortie (a battery swap ends a sortie: a mission file is flown on one battery). Every position is
+the exact WGS84 conversion of the plan's ENU point (``wtcli.plan.geodesy``). Waypoints are in
+frame 3: altitude relative to the launch point (home) = the point's height minus home's, both
+exact (not the ENU z difference, which is d^2/2R lower at d from the origin). Home is the launch
+point in frame 0, AMSL (site.origin.alt plus the ellipsoid-height difference). Commands used:
 
 * 22 NAV_TAKEOFF to the take-off altitude, 16 NAV_WAYPOINT (p2 acceptance radius, p4 yaw = the
   camera heading, so the vehicle turns to face what the camera looks at), 21 NAV_LAND at home;
@@ -25,10 +27,13 @@ import numpy as np
 
 from wtcli.errors import ConfigError
 from wtcli.jsonio import atomic_write_text
-from wtcli.plan.geodesy import enu_to_geodetic
+from wtcli.plan.geodesy import MAX_SITE_RADIUS_M, check_site_extent, enu_to_geodetic
 from wtcli.plan_file import Plan, Route
 
 ACCEPT_RADIUS_M = 0.5
+ALTITUDE_REFERENCE = ("metres above mean sea level: site.origin.alt plus the exact WGS84 "
+                      "ellipsoid-height difference from the origin (geoid taken as parallel to "
+                      "the ellipsoid across the site)")
 FIRMWARE_ARDUPILOT = 3
 VEHICLE_QUAD = 2
 
@@ -58,12 +63,23 @@ def _require_origin(plan: Plan) -> dict:
     return plan.site_origin
 
 
+def check_plan_extent(plan: Plan) -> None:
+    """Refuse (ConfigError) a plan whose turbines or routes reach beyond the site radius."""
+    check_site_extent({f"turbines[{i}] ({t.id}).position": t.base_xyz
+                       for i, t in enumerate(plan.turbines)})
+    for r in plan.routes:
+        far = np.nonzero(~(np.hypot(r.pos[:, 0], r.pos[:, 1]) <= MAX_SITE_RADIUS_M))[0]
+        if far.size:
+            check_site_extent({f"{r.uav} route point {int(far[0])} (launch point or leg)":
+                               r.pos[far[0]]})
+
+
 def mission_items(plan: Plan, route: Route, first: int, last: int) -> tuple[list[Item], np.ndarray]:
     """The items of one sortie (without the home row) and home [lat, lon, alt AMSL]."""
     origin = _require_origin(plan)
     llh = enu_to_geodetic(route.pos[first:last + 1], origin)
     home = llh[0]
-    rel = route.pos[first:last + 1, 2] - route.pos[first, 2]
+    rel = llh[:, 2] - home[2]  # exact height above home, not the ENU z difference
     items: list[Item] = []
     speed, pitch = None, None
     n = last - first + 1
@@ -87,7 +103,7 @@ def mission_items(plan: Plan, route: Route, first: int, last: int) -> tuple[list
         if route.photo[i]:
             items.append(Item(203, 2, (0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0)))
     items.append(Item(21, 3, (0.0, 0.0, 0.0, float(route.yaw_deg[last]), float(llh[-1, 0]),
-                              float(llh[-1, 1]), 0.0)))
+                              float(llh[-1, 1]), round(float(rel[-1]), 3) + 0.0)))
     return items, home
 
 
@@ -128,8 +144,10 @@ def qgc_plan_dict(items: list[Item], home: np.ndarray, cruise: float, hover: flo
 
 def geojson_dict(plan: Plan) -> dict:
     """RFC 7946 FeatureCollection: turbines (points), each route (line) and its photo points;
-    coordinates [lon, lat, alt AMSL]."""
+    coordinates [lon, lat, alt AMSL], exact WGS84; the foreign member ``altitude_reference``
+    says so in the file."""
     origin = _require_origin(plan)
+    check_plan_extent(plan)
     feats = []
     for t in plan.turbines:
         ll = enu_to_geodetic(t.base_xyz[None], origin)[0]
@@ -147,13 +165,14 @@ def geojson_dict(plan: Plan) -> dict:
         if photos:
             feats.append({"type": "Feature", "geometry": {"type": "MultiPoint", "coordinates": photos},
                           "properties": {"kind": "photos", "uav": r.uav}})
-    return {"type": "FeatureCollection", "features": feats}
+    return {"type": "FeatureCollection", "altitude_reference": ALTITUDE_REFERENCE, "features": feats}
 
 
 def export_all(plan: Plan, out_dir: str | Path, stem: str = "mission", cruise: float = 8.0,
                hover: float = 2.0) -> list[Path]:
     """Write ``STEM_UAV_sN.plan`` and ``.waypoints`` per UAV sortie and ``STEM.geojson``."""
     _require_origin(plan)
+    check_plan_extent(plan)
     out_dir = Path(out_dir)
     written = []
     for r in plan.routes:
