@@ -196,9 +196,9 @@ def test_cli_single_image_ok_and_failing(cli, tmp_path):
 
 @pytest.mark.parametrize("content, code, msg", [
     ("{broken", 3, "not valid JSON"),
-    ('{"schema": "wtinspect.plan", "images": [], "annotations": []}', 3, "expected schema"),
+    ('{"schema": "wtinspect.plan", "images": [], "annotations": []}', 3, "got schema 'wtinspect.plan'"),
     ('{"images": [{"id": 1}], "annotations": []}', 3, "needs integer"),
-    ('[1, 2]', 3, "COCO instances"),
+    ('[1, 2]', 3, "JSON object, got list"),
 ])
 def test_cli_wrong_json_is_one_line(cli, tmp_path, content, code, msg):
     p = tmp_path / "x.json"

@@ -14,11 +14,22 @@ import traceback
 from typing import Any, Optional
 
 import typer
+from rich.markup import escape
 from typer.core import TyperGroup
 
 from wtcli import __version__
 from wtcli.console import err_console
 from wtcli.errors import ExitCode, WtError
+
+
+def one_line(text: str, limit: int = 400) -> str:
+    """An error message as printed: one line (newlines folded), at most ``limit`` characters,
+    and markup-escaped, so text in square brackets from an input (``[.nan, 0, 0]``) is shown
+    as it is rather than taken for a console style."""
+    text = " ".join(str(text).split("\n")).replace("\r", " ")
+    if len(text) > limit:
+        text = text[:limit - 3] + "..."
+    return escape(text)
 
 
 def _debug(ctx: typer.Context) -> bool:
@@ -46,16 +57,30 @@ class _Boundary(TyperGroup):
         except WtError as e:
             if _debug(ctx):
                 err_console.print(traceback.format_exc(), markup=False)
-            err_console.print(f"[red]error:[/red] {e}", markup=True, soft_wrap=True)
+            err_console.print(f"[red]error:[/red] {one_line(str(e))}", markup=True, soft_wrap=True)
             ctx.exit(int(e.exit_code))
-        except Exception as e:  # noqa: BLE001 - the one place that catches everything
+        except OSError as e:
+            if e.filename is None:
+                self._unexpected(ctx, e)
+            # An OSError that names its file is that file's problem, not a bug: a folder
+            # without permission, a file vanishing mid-run. Exit 3 with the path.
             if _debug(ctx):
                 err_console.print(traceback.format_exc(), markup=False)
-                ctx.exit(ExitCode.UNEXPECTED)
-            err_console.print(f"[red]unexpected error:[/red] {e.__class__.__name__}: {e} "
-                              "(run with --debug for the traceback)", markup=True,
-                              soft_wrap=True)
+            err_console.print(f"[red]error:[/red] {one_line(str(e.filename))}: "
+                              f"{one_line(e.strerror or e.__class__.__name__)}",
+                              markup=True, soft_wrap=True)
+            ctx.exit(ExitCode.INPUT)
+        except Exception as e:  # noqa: BLE001 - the one place that catches everything
+            self._unexpected(ctx, e)
+
+    @staticmethod
+    def _unexpected(ctx: typer.Context, e: BaseException) -> None:
+        if _debug(ctx):
+            err_console.print(traceback.format_exc(), markup=False)
             ctx.exit(ExitCode.UNEXPECTED)
+        err_console.print(f"[red]unexpected error:[/red] {e.__class__.__name__}: {one_line(str(e))} "
+                          "(run with --debug for the traceback)", markup=True, soft_wrap=True)
+        ctx.exit(ExitCode.UNEXPECTED)
 
 
 app = typer.Typer(

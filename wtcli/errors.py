@@ -33,6 +33,13 @@ class InputError(WtError):
     exit_code = ExitCode.INPUT
 
 
+class OutputError(WtError):
+    """An output path cannot be written: a file in the way, a read-only folder, a full disk.
+    Same exit code as an unreadable input (docs/exit-codes.md); the message names the path."""
+
+    exit_code = ExitCode.INPUT
+
+
 class ConfigError(WtError):
     exit_code = ExitCode.CONFIG
 

@@ -1,11 +1,16 @@
 """Every JSON file the tool writes goes through here: schema header, rounded floats, no NaN,
-sorted keys, atomic write (a crash never leaves half a file behind)."""
+sorted keys, atomic write (a crash never leaves half a file behind). Every JSON file it reads
+goes through ``read_json``: NaN/Infinity refused, ``schema`` and ``schema_version`` checked
+(a newer version than this wtinspect knows is refused), errors naming the file. ``shown``
+quotes a value in a message, bounded however large the value is."""
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
+import reprlib
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -13,9 +18,33 @@ from typing import Any
 import numpy as np
 
 from wtcli import __version__
-from wtcli.errors import InputError
+from wtcli.errors import InputError, OutputError
 
 FLOAT_DIGITS = 6
+SHOWN_CHARS = 80  # the most characters of an input value an error message quotes
+
+_repr = reprlib.Repr()
+_repr.maxlevel, _repr.maxlist, _repr.maxtuple, _repr.maxdict = 3, 6, 6, 4
+_repr.maxstring, _repr.maxother, _repr.maxlong = SHOWN_CHARS, SHOWN_CHARS, 40
+
+
+def shown(value: Any) -> str:
+    """``repr(value)`` for an error message, bounded: nested or shared structures (a YAML alias
+    bomb) are cut at depth 3 and 6 items per level, and the text at 80 characters."""
+    text = _repr.repr(value)
+    return text if len(text) <= SHOWN_CHARS else text[:SHOWN_CHARS - 3] + "..."
+
+
+def os_reason(e: OSError) -> str:
+    """'No space left on device' rather than '[Errno 28] No space left on device: path'."""
+    if e.strerror:
+        return e.strerror
+    return errno.errorcode.get(e.errno or 0, e.__class__.__name__)
+
+
+def write_failed(path: str | Path, e: OSError) -> OutputError:
+    """The one message for an output that could not be written (exit 3, docs/exit-codes.md)."""
+    return OutputError(f"{path}: cannot write ({os_reason(e)})")
 
 
 def _umask() -> int:
@@ -61,33 +90,31 @@ def dumps(doc: Any, digits: int = FLOAT_DIGITS, indent: int | None = 1) -> str:
 
 
 def atomic_write_text(path: str | Path, text: str) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        os.fchmod(fd, _FILE_MODE)
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-            if not text.endswith("\n"):
-                f.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return atomic_write_bytes(path, (text if text.endswith("\n") else text + "\n").encode("utf-8"))
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
+    """Write ``data`` to a temporary ``.NAME.XXXXXXXX`` beside ``path``, then rename it over
+    ``path``: readers see the old file or the new one, never half of one. Any OSError (a file
+    in the way, a read-only folder, a full disk) becomes OutputError naming ``path``; the
+    temporary file is removed (``outputs.remove_temp_files`` clears those a kill left)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        if path.is_dir():
+            raise IsADirectoryError(errno.EISDIR, "a folder is in the way")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    except OSError as e:
+        raise write_failed(path, e) from None
     try:
         os.fchmod(fd, _FILE_MODE)
         with os.fdopen(fd, "wb") as f:
             f.write(data)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         Path(tmp).unlink(missing_ok=True)
+        if isinstance(e, OSError):
+            raise write_failed(path, e) from None
         raise
     return path
 
@@ -96,24 +123,82 @@ def write_json(path: str | Path, doc: Any, digits: int = FLOAT_DIGITS) -> Path:
     return atomic_write_text(path, dumps(doc, digits))
 
 
+class _NotANumber(ValueError):
+    pass
+
+
+def _refuse_constant(name: str) -> Any:
+    raise _NotANumber(name)
+
+
+def _finite_float(text: str) -> float:
+    f = float(text)
+    if not math.isfinite(f):  # 1e400 parses to inf
+        raise _NotANumber(text)
+    return f
+
+
 def read_json(path: str | Path, schema: str | None = None,
-              max_version: int | None = None) -> Any:
-    """Read a JSON file; with ``schema``, check its header and name the file in any error."""
+              max_version: int | None = None, header_required: bool = True) -> Any:
+    """Read a JSON file, naming the file in any error. NaN, Infinity and numbers too large for
+    a float are refused (JSON has none). With ``schema``, the header is checked
+    (``check_header``); ``header_required=False`` also accepts a file without one (a COCO file
+    from another tool), but never one with another schema or a newer version."""
     path = Path(path)
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise InputError(f"{path}: file not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise InputError(f"{path}: cannot read ({e.__class__.__name__})") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: is a folder, expected a JSON file") from None
+    except OSError as e:
+        raise InputError(f"{path}: cannot read ({os_reason(e)})") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not valid JSON (not UTF-8 text)") from None
+    try:
+        doc = json.loads(text, parse_constant=_refuse_constant, parse_float=_finite_float)
+    except _NotANumber as e:
+        raise InputError(f"{path}: not valid JSON ({shown(e.args[0])[1:-1]} is not a finite "
+                         "number)") from None
     except json.JSONDecodeError as e:
         raise InputError(f"{path}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from None
+    except RecursionError:
+        raise InputError(f"{path}: not valid JSON (nested too deeply)") from None
     if schema is not None:
-        if not isinstance(doc, dict) or doc.get("schema") != schema:
-            got = doc.get("schema") if isinstance(doc, dict) else type(doc).__name__
-            raise InputError(f"{path}: expected a '{schema}' file, got schema {got!r}")
-        ver = doc.get("schema_version")
-        if not isinstance(ver, int) or (max_version is not None and ver > max_version):
-            raise InputError(f"{path}: schema_version {ver!r} of '{schema}' is not supported "
-                             f"(this wtinspect reads up to {max_version})")
+        check_header(doc, path, schema, max_version, required=header_required)
     return doc
+
+
+def check_header(doc: Any, path: str | Path, schema: str, max_version: int | None,
+                 required: bool = True) -> None:
+    """The one check of a file's ``schema`` and ``schema_version``: the schema must be
+    ``schema``; the version an integer from 1 to ``max_version`` (a newer file may mean things
+    this wtinspect would misread, so it is refused rather than guessed at). With
+    ``required=False`` a missing key passes, a present one is still checked."""
+    if not isinstance(doc, dict):
+        raise InputError(f"{path}: expected a '{schema}' JSON object, got {type(doc).__name__}")
+    if required or "schema" in doc:
+        if doc.get("schema") != schema:
+            raise InputError(f"{path}: expected a '{schema}' file, got schema {shown(doc.get('schema'))}")
+    if required or "schema_version" in doc:
+        ver = doc.get("schema_version")
+        if isinstance(ver, bool) or not isinstance(ver, int) or ver < 1:
+            raise InputError(f"{path}: schema_version: expected an integer >= 1, got {shown(ver)}")
+        if max_version is not None and ver > max_version:
+            raise InputError(f"{path}: schema_version {ver} of '{schema}' is newer than this "
+                             f"wtinspect reads (up to {max_version}); update wtinspect")
+
+
+def number(value: Any, where: str, lo: float | None = None, hi: float | None = None,
+           integer: bool = False) -> Any:
+    """A number read from a file, checked: finite, of the right kind, within [lo, hi];
+    InputError naming ``where`` (``file: images[0].width``) and the value otherwise."""
+    kind = "an integer" if integer else "a number"
+    ok = (isinstance(value, int) or (isinstance(value, float) and value.is_integer())) \
+        if integer else isinstance(value, (int, float))
+    if isinstance(value, bool) or not ok or not math.isfinite(value) \
+            or (lo is not None and value < lo) or (hi is not None and value > hi):
+        rng = (f" in [{lo:g}, {hi:g}]" if lo is not None and hi is not None
+               else f" >= {lo:g}" if lo is not None else f" <= {hi:g}" if hi is not None else "")
+        raise InputError(f"{where}: expected {kind}{rng}, got {shown(value)}")
+    return int(value) if integer else float(value)

@@ -8,6 +8,7 @@ starting with a background run) or polygons ``[[x1, y1, x2, y2, ...], ...]`` (fo
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -16,12 +17,16 @@ import cv2
 import numpy as np
 
 from wtcli.errors import InputError
-from wtcli.jsonio import document, read_json, write_json
+from wtcli.jsonio import document, number, read_json, shown, write_json
 
 LABELS = ("blade", "tower", "nacelle")
 CATEGORIES = [{"id": i + 1, "name": n, "supercategory": "wind_turbine"} for i, n in enumerate(LABELS)]
 INSTANCES_SCHEMA = "wtinspect.instances"
 INSTANCES_VERSION = 1
+# The largest image (width x height) an instances file may declare: 200 megapixels, above the
+# 100-150 MP of inspection cameras. Checked before any mask is allocated, so a file declaring
+# 200000 x 200000 is refused at once instead of trying to allocate 37 GiB per mask.
+MAX_IMAGE_PIXELS = 200_000_000
 
 
 def rle_encode(mask: np.ndarray) -> dict[str, Any]:
@@ -38,13 +43,22 @@ def rle_encode(mask: np.ndarray) -> dict[str, Any]:
 
 
 def rle_decode(rle: dict[str, Any]) -> np.ndarray:
-    h, w = (int(x) for x in rle["size"])
+    size = rle["size"]
+    if not isinstance(size, list) or len(size) != 2:
+        raise ValueError(f"RLE size: expected [H, W], got {shown(size)}")
+    h, w = (check_size(v, f"RLE size[{i}]") for i, v in enumerate(size))
+    check_pixels(h, w, "RLE size")
     counts = rle["counts"]
     if isinstance(counts, str):
         raise ValueError("compressed RLE strings are not supported; write uncompressed RLE "
                          "(counts as a list of integers) or polygons")
+    if not isinstance(counts, list):
+        raise ValueError(f"RLE counts: expected a list of integers, got {shown(counts)}")
+    for i, c in enumerate(counts):
+        if isinstance(c, bool) or not isinstance(c, int) or not 0 <= c <= h * w:
+            raise ValueError(f"RLE counts[{i}]: expected an integer in [0, {h * w}], got {shown(c)}")
     counts = np.asarray(counts, dtype=np.int64)
-    if (counts < 0).any() or counts.sum() != h * w:
+    if counts.sum() != h * w:
         raise ValueError(f"RLE counts sum to {int(counts.sum())}, expected {h * w} (= H*W)")
     values = np.arange(len(counts)) % 2 == 1
     flat = np.repeat(values, counts)
@@ -65,9 +79,17 @@ def polygons_encode(mask: np.ndarray, epsilon: float = 0.0) -> list[list[float]]
 
 def polygons_decode(polys: list[list[float]], h: int, w: int) -> np.ndarray:
     canvas = np.zeros((h, w), np.uint8)
-    for p in polys:
-        if len(p) < 6 or len(p) % 2:
-            raise ValueError(f"a polygon needs >= 3 (x, y) points, got {len(p)} numbers")
+    for k, p in enumerate(polys):
+        if not isinstance(p, list) or len(p) < 6 or len(p) % 2:
+            raise ValueError(f"polygon {k}: needs >= 3 (x, y) points, got {shown(p)}")
+        for i, v in enumerate(p):
+            # Within the image extended by its own size on each side: any real polygon, and
+            # far from the int32 overflow of the fixed-point fill (1e12 would wrap silently).
+            lim = w if i % 2 == 0 else h
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
+                    or not -lim <= v <= 2 * lim:
+                raise ValueError(f"polygon {k}[{i}]: expected a coordinate in [{-lim}, {2 * lim}] "
+                                 f"(the image is {w}x{h}), got {shown(v)}")
         pts = np.round(np.asarray(p, float).reshape(-1, 2) * 16).astype(np.int32)
         cv2.fillPoly(canvas, [pts], 1, shift=4)
     return canvas.astype(bool)
@@ -82,6 +104,21 @@ def decode_segmentation(seg: Any, h: int, w: int) -> np.ndarray:
     if isinstance(seg, list):
         return polygons_decode(seg, h, w)
     raise ValueError(f"segmentation must be RLE (dict) or polygons (list), got {type(seg).__name__}")
+
+
+def check_size(value: Any, where: str) -> int:
+    """An image side read from a file: an integer >= 1 (ValueError naming ``where``)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or value != int(value) or value < 1:
+        raise ValueError(f"{where}: expected an integer >= 1, got {shown(value)}")
+    return int(value)
+
+
+def check_pixels(h: int, w: int, where: str) -> None:
+    """Refuse an image larger than MAX_IMAGE_PIXELS before anything is allocated for it."""
+    if h * w > MAX_IMAGE_PIXELS:
+        raise ValueError(f"{where}: {w}x{h} is {h * w:,} pixels, over the limit of "
+                         f"{MAX_IMAGE_PIXELS:,} (docs/contours.md)")
 
 
 def mask_box(mask: np.ndarray) -> np.ndarray:
@@ -166,23 +203,28 @@ class Instances:
         for j, a in enumerate(anns):
             at = f"{where}annotations[{j}]"
             try:
-                cid = int(a["category_id"])
-                if not 1 <= cid <= len(LABELS):
-                    raise ValueError(f"category_id {cid} not in 1..{len(LABELS)}")
+                if not isinstance(a, dict):
+                    raise ValueError(f"expected an object, got {shown(a)}")
+                cid = number(a["category_id"], "category_id", 1, len(LABELS), integer=True)
+                score = number(a.get("score", 1.0), "score", 0.0, 1.0)
+                box = a.get("bbox")
+                if box is not None:
+                    if not isinstance(box, list) or len(box) != 4:
+                        raise ValueError(f"bbox: expected [x, y, width, height], got {shown(box)}")
+                    x, y = (number(v, "bbox", -w, 2 * w if i == 0 else 2 * h)
+                            for i, v in enumerate(box[:2]))
+                    bw, bh = (number(v, "bbox width/height", 0, 3 * max(h, w)) for v in box[2:])
                 m = decode_segmentation(a["segmentation"], h, w)
-                score = float(a.get("score", 1.0))
             except KeyError as e:
                 raise InputError(f"{at}: missing key {e.args[0]!r}") from None
             except (TypeError, ValueError) as e:
                 raise InputError(f"{at}: {e}") from None
+            except InputError as e:
+                raise InputError(f"{at}.{e}") from None
             labels.append(LABELS[cid - 1])
             masks.append(m)
             scores.append(score)
-            if "bbox" in a and len(a["bbox"]) == 4:
-                x, y, bw, bh = (float(v) for v in a["bbox"])
-                boxes.append([x, y, x + bw, y + bh])
-            else:
-                boxes.append(mask_box(m).tolist())
+            boxes.append([x, y, x + bw, y + bh] if box is not None else mask_box(m).tolist())
         if not labels:
             return cls.empty(h, w)
         return cls(np.array(labels, dtype=object), np.stack(masks), np.array(scores), np.array(boxes))
@@ -209,27 +251,35 @@ def write_instances(path: str | Path, images: list[dict], per_image: list[Instan
 def read_instances(path: str | Path) -> list[tuple[dict, Instances]]:
     """Read a COCO instances file (ours, or any COCO-compatible one with our category names)."""
     path = Path(path)
-    doc = read_json(path)
-    if not isinstance(doc, dict) or not isinstance(doc.get("images"), list) \
-            or not isinstance(doc.get("annotations"), list):
+    doc = read_json(path, INSTANCES_SCHEMA, INSTANCES_VERSION, header_required=False)
+    if not isinstance(doc.get("images"), list) or not isinstance(doc.get("annotations"), list):
         raise InputError(f"{path}: expected a COCO instances JSON with 'images' and 'annotations' lists")
-    if doc.get("schema", INSTANCES_SCHEMA) != INSTANCES_SCHEMA:
-        raise InputError(f"{path}: expected schema '{INSTANCES_SCHEMA}', got {doc.get('schema')!r}")
-    cats = {c.get("id"): c.get("name") for c in doc.get("categories", CATEGORIES)}
+    categories = doc.get("categories", CATEGORIES)
+    if not isinstance(categories, list) or not all(isinstance(c, dict) for c in categories):
+        raise InputError(f"{path}: categories: expected a list of objects, got {shown(categories)}")
+    cats = {c.get("id"): c.get("name") for c in categories}
     if any(cats.get(i + 1) != n for i, n in enumerate(LABELS)):
         raise InputError(f"{path}: categories must be {[c['name'] for c in CATEGORIES]} with ids 1..3, "
-                         f"got {sorted(cats.items())}")
+                         f"got {shown(list(cats.items()))}")
     by_image: dict[int, list[dict]] = {}
     for a in doc["annotations"]:
-        if not isinstance(a, dict) or "image_id" not in a:
-            raise InputError(f"{path}: every annotation needs an 'image_id'")
+        if not isinstance(a, dict) or isinstance(a.get("image_id"), bool) \
+                or not isinstance(a.get("image_id"), (int, str)):
+            raise InputError(f"{path}: every annotation needs an integer 'image_id', got "
+                             f"{shown(a.get('image_id') if isinstance(a, dict) else a)}")
         by_image.setdefault(a["image_id"], []).append(a)
     out = []
     for i, img in enumerate(doc["images"]):
+        if not isinstance(img, dict) or not all(k in img for k in ("id", "width", "height")):
+            raise InputError(f"{path}: images[{i}] needs integer 'id', 'width' and 'height'")
         try:
-            h, w, iid = int(img["height"]), int(img["width"]), img["id"]
-        except (KeyError, TypeError, ValueError):
-            raise InputError(f"{path}: images[{i}] needs integer 'id', 'width' and 'height'") from None
+            h, w = check_size(img["height"], "height"), check_size(img["width"], "width")
+            check_pixels(h, w, "width x height")
+            iid = img["id"]
+            if isinstance(iid, bool) or not isinstance(iid, (int, str)):
+                raise ValueError(f"id: expected an integer, got {shown(iid)}")
+        except (TypeError, ValueError) as e:
+            raise InputError(f"{path}: images[{i}].{e}") from None
         out.append((img, Instances.from_annotations(by_image.get(iid, []), h, w,
-                                                    where=f"{path}: image {iid} ")))
+                                                    where=f"{path}: image {shown(iid)} ")))
     return out

@@ -1,0 +1,94 @@
+"""The one rule for outputs, shared by every command.
+
+- Before the expensive work, ``writable_folder`` / ``writable_file`` prove the output location
+  can be written (a folder is created and a probe file written and removed), so a read-only
+  ``--out`` fails in a second, not after the model has run.
+- Every write goes through ``jsonio.atomic_write_*``: an OSError becomes ``OutputError`` naming
+  the file (exit 3, docs/exit-codes.md), and no half-written file is ever visible.
+- ``remove_temp_files`` clears the ``.NAME.XXXXXXXX`` temporaries a kill between write and
+  rename leaves behind; ``remove_stale`` drops an aggregate a rerun no longer vouches for.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import re
+import tempfile
+from pathlib import Path
+
+from wtcli.errors import OutputError
+from wtcli.jsonio import write_failed
+
+# jsonio.atomic_write_bytes names its temporaries tempfile.mkstemp(prefix=".NAME."): a dot,
+# the final name, a dot, 8 random characters. Only names of files we write (json, png) match.
+_TEMP_NAME = re.compile(r"^\..+\.(json|png|pt|ckpt|csv|kml|kmz|plan|waypoints|txt)\.[a-z0-9_]{8}$")
+
+
+def writable_folder(folder: str | Path, what: str = "--out") -> Path:
+    """Create ``folder`` if needed and prove a file can be written in it; OutputError
+    (exit 3) naming it otherwise. Call before any expensive work."""
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise OutputError(f"{folder}: exists and is not a folder; choose another {what}")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".wtinspect-probe.", dir=folder)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise OutputError(f"{folder}: cannot write there ({_reason(e)}); choose another "
+                          f"{what}") from None
+    return folder
+
+
+def writable_file(path: str | Path, what: str = "--out") -> Path:
+    """Prove ``path`` can be written (its folder is created): nothing in the way, folder
+    writable. OutputError (exit 3) naming it otherwise. The file itself is not touched."""
+    path = Path(path)
+    if path.is_dir():
+        raise OutputError(f"{path}: is a folder; {what} needs a file name")
+    parent = path.parent
+    if parent.exists() and not parent.is_dir():
+        raise OutputError(f"{parent}: exists and is not a folder, so {path} cannot be written")
+    writable_folder(parent, what)
+    return path
+
+
+def remove_temp_files(folder: str | Path) -> list[Path]:
+    """Delete the ``.NAME.XXXXXXXX`` temporaries of atomic writes under ``folder`` (left by
+    a kill between write and rename); returns what was removed."""
+    folder = Path(folder)
+    removed: list[Path] = []
+    if not folder.is_dir():
+        return removed
+    for dirpath, _, names in os.walk(folder):
+        for name in names:
+            if _TEMP_NAME.match(name):
+                p = Path(dirpath) / name
+                try:
+                    p.unlink()
+                except FileNotFoundError:
+                    continue
+                except OSError as e:
+                    raise write_failed(p, e) from None
+                removed.append(p)
+    return removed
+
+
+def remove_stale(path: str | Path) -> None:
+    """Remove an earlier output this run does not replace (a combined file none of this run's
+    items went into), so no stale aggregate sits beside a fresh report."""
+    path = Path(path)
+    try:
+        path.unlink(missing_ok=True)
+    except OSError as e:
+        raise write_failed(path, e) from None
+
+
+def _reason(e: OSError) -> str:
+    if e.errno in (errno.EACCES, errno.EPERM):
+        return "permission denied"
+    if e.errno == errno.EROFS:
+        return "read-only file system"
+    return e.strerror or e.__class__.__name__
