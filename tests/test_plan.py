@@ -1056,3 +1056,58 @@ def test_wide_tower_backs_the_nacelle_stations_off_instead_of_crashing():
 def test_nacelle_with_no_possible_station_is_refused_by_name():
     with pytest.raises(PlanError, match=r"T1 nacelle: no photo station .* mission.inspect_nacelle: false"):
         plan_mission(_wide_tower_mission(8.0))
+
+
+# ---- one source of defaults ------------------------------------------------------------------------
+def _doc_defaults(section: str) -> dict[str, str]:
+    """key -> the default column of a table in docs/turbines-yaml.md (## `section`)."""
+    text = (ROOT / "docs" / "turbines-yaml.md").read_text(encoding="utf-8")
+    body = text.split(f"## `{section}`", 1)[1].split("\n## ", 1)[0]
+    out = {}
+    for line in body.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) >= 3 and cells[0].startswith("`"):
+            out[cells[0].strip("`")] = cells[2]
+    return out
+
+
+def _as_value(text: str):
+    t = text.replace("\u2212", "-")
+    if t in ("true", "false"):
+        return t == "true"
+    return float(t)
+
+
+@pytest.mark.parametrize("section,cls", [("fleet", Fleet), ("mission", Settings)])
+def test_docs_yaml_and_dataclasses_agree_on_every_default(section, cls):
+    import dataclasses
+
+    from wtcli.plan.config import default_dict
+
+    yaml_d = default_dict()[section]
+    docs = _doc_defaults(section)
+    fields = {f.name: f.default for f in dataclasses.fields(cls)}
+    assert set(docs) == set(yaml_d), "every key has a row in the docs' table and a packaged default"
+    for key, value in yaml_d.items():
+        if key == "uavs":
+            assert fields[key] == tuple(f"UAV{k + 1}" for k in range(value)) and docs[key] == str(value)
+            continue
+        if key == "launch":
+            assert value is None and fields[key] is None and "in front of" in docs[key]
+            continue
+        assert fields[key] == value, f"{section}.{key}: dataclass {fields[key]!r}, YAML {value!r}"
+        assert _as_value(docs[key]) == value, f"{section}.{key}: docs {docs[key]!r}, YAML {value!r}"
+
+
+def test_camera_defaults_in_docs_match_the_packaged_yaml():
+    from wtcli.plan.config import default_dict
+
+    docs = _doc_defaults("camera")
+    assert {k: _as_value(v) for k, v in docs.items()} == default_dict()["camera"]
+
+
+def test_a_mission_built_in_code_plans_like_a_yaml_that_leaves_keys_out():
+    d = {"turbines": [{"id": "T1", "position": [0, 0, 0], "hub_height_m": 80,
+                       "rotor_diameter_m": 90, "yaw_deg": 0}]}
+    m = mission_from_dict(d)
+    assert m.settings == Settings() and m.fleet == Fleet()

@@ -24,6 +24,21 @@ from wtcli.yamlcheck import (merge, check_keys, load_yaml, need_mapping, number,
 
 DEFAULTS_PATH = Path(__file__).resolve().parents[1] / "data" / "turbines-defaults.yaml"
 
+
+def default_dict() -> dict:
+    """The packaged defaults, freshly read (callers may change their copy)."""
+    return yaml.safe_load(DEFAULTS_PATH.read_text(encoding="utf-8"))
+
+
+# The packaged YAML is the one source of every default: the dataclasses below read theirs from
+# it, so a Mission built in code plans exactly like a turbines.yaml that leaves the key out
+# (tests/test_plan.py checks the docs' tables against both).
+_DEFAULTS = default_dict()
+
+
+def _default(section: str, key: str) -> Any:
+    return _DEFAULTS[section][key]
+
 TOP_KEYS = ("site", "camera", "fleet", "mission", "turbines")
 CAMERA_KEYS = ("sensor_width_mm", "focal_mm", "width_px", "height_px")
 FLEET_KEYS = ("uavs", "launch", "inspection_speed_m_s", "cruise_speed_m_s", "max_speed_m_s",
@@ -44,19 +59,19 @@ POSE_KEYS = ("position", "look_at", "roll_deg")
 
 @dataclass(frozen=True)
 class Fleet:
-    uavs: tuple[str, ...] = ("UAV1",)
+    uavs: tuple[str, ...] = tuple(f"UAV{k + 1}" for k in range(_default("fleet", "uavs")))
     launch: tuple[float, float, float] | None = None  # ENU m on the ground; None = automatic
-    inspection_speed_m_s: float = 2.0
-    cruise_speed_m_s: float = 8.0
-    max_speed_m_s: float = 12.0
-    climb_rate_m_s: float = 3.0
-    battery_minutes: float = 25.0
-    battery_reserve_minutes: float = 5.0
-    battery_swap_s: float = 180.0
+    inspection_speed_m_s: float = float(_default("fleet", "inspection_speed_m_s"))
+    cruise_speed_m_s: float = float(_default("fleet", "cruise_speed_m_s"))
+    max_speed_m_s: float = float(_default("fleet", "max_speed_m_s"))
+    climb_rate_m_s: float = float(_default("fleet", "climb_rate_m_s"))
+    battery_minutes: float = float(_default("fleet", "battery_minutes"))
+    battery_reserve_minutes: float = float(_default("fleet", "battery_reserve_minutes"))
+    battery_swap_s: float = float(_default("fleet", "battery_swap_s"))
     # Camera elevation the gimbal can reach (0 level, -90 straight down, +90 straight up): the
     # default needs one that can look straight up (top-mounted); under-slung ones stop near +30.
-    gimbal_pitch_min_deg: float = -90.0
-    gimbal_pitch_max_deg: float = 90.0
+    gimbal_pitch_min_deg: float = float(_default("fleet", "gimbal_pitch_min_deg"))
+    gimbal_pitch_max_deg: float = float(_default("fleet", "gimbal_pitch_max_deg"))
 
     def __post_init__(self) -> None:
         if not self.uavs or len(set(self.uavs)) != len(self.uavs):
@@ -84,19 +99,19 @@ class Fleet:
 
 @dataclass(frozen=True)
 class Settings:
-    safe_distance_m: float = 3.0
-    tracking_margin_m: float = 1.0
-    target_gsd_mm: float = 1.5
-    overlap: float = 0.6
-    max_incidence_deg: float = 60.0
-    min_altitude_m: float = 5.0
-    takeoff_altitude_m: float = 10.0
-    min_side_coverage: float = 0.9
-    coverage_spacing_m: float = 0.5  # as fly measures; at 1 m a root sample weighs ~2 % of a side
-    inspect_tower: bool = True
-    inspect_nacelle: bool = True
-    tower_columns: int = 0
-    allow_coarser_gsd: bool = True
+    safe_distance_m: float = float(_default("mission", "safe_distance_m"))
+    tracking_margin_m: float = float(_default("mission", "tracking_margin_m"))
+    target_gsd_mm: float = float(_default("mission", "target_gsd_mm"))
+    overlap: float = float(_default("mission", "overlap"))
+    max_incidence_deg: float = float(_default("mission", "max_incidence_deg"))
+    min_altitude_m: float = float(_default("mission", "min_altitude_m"))
+    takeoff_altitude_m: float = float(_default("mission", "takeoff_altitude_m"))
+    min_side_coverage: float = float(_default("mission", "min_side_coverage"))
+    coverage_spacing_m: float = float(_default("mission", "coverage_spacing_m"))
+    inspect_tower: bool = bool(_default("mission", "inspect_tower"))
+    inspect_nacelle: bool = bool(_default("mission", "inspect_nacelle"))
+    tower_columns: int = int(_default("mission", "tower_columns"))
+    allow_coarser_gsd: bool = bool(_default("mission", "allow_coarser_gsd"))
 
     def __post_init__(self) -> None:
         if not self.safe_distance_m > 0:
@@ -176,10 +191,6 @@ class Mission:
 
 
 # ---- loading -----------------------------------------------------------------------------------
-def default_dict() -> dict:
-    return yaml.safe_load(DEFAULTS_PATH.read_text(encoding="utf-8"))
-
-
 _merge = merge  # the one deep merge lives in wtcli.yamlcheck
 
 
