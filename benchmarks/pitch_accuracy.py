@@ -14,7 +14,9 @@ Each sample is a random turbine (size, yaw, rotor azimuth) seen through the one 
 Ground truth: φ = ``camera.image_angle_deg(hub_center, tip)``, θ = φ mod 180. Printed: mean,
 95th percentile and max |error| of θ (principal axis, the classified one), θ eq. 7
 (minAreaRect), φ; the number of φ off by more than 90° (i.e. flipped); class accuracy and how
-far from a class boundary each misclassified blade's true θ lies; time per image.
+far from a class boundary each misclassified blade's true θ lies; time per image. The figures
+are also written to ``benchmarks/results/pitch_accuracy.json`` (``--out``), with the command,
+date and machine (``benchmarks/_results.py``); ``docs/benchmarks.md`` shows them.
 """
 
 from __future__ import annotations
@@ -34,6 +36,8 @@ from wtcli.geometry import Camera, Turbine  # noqa: E402
 from wtcli.geometry.render import instance_masks  # noqa: E402
 from wtcli.masks import Instances  # noqa: E402
 from wtcli.pitch import classify_theta, pitch_from_instances  # noqa: E402
+
+from _results import save  # noqa: E402
 
 BOUNDARIES = np.array([0.0, 30.0, 60.0, 120.0, 150.0, 180.0])
 
@@ -154,7 +158,7 @@ def run_synth(n: int, seed: int, width: int, height: int) -> dict:
             "ms_per_image": 1000 * secs / max(1, done - len(failures))}
 
 
-def run_real(root: Path) -> list[str]:
+def run_real(root: Path) -> list[dict]:
     """Real photos (WTA dataset, Zampokas et al., ICUAS 2022) with semantic masks: blade class
     split into connected components, tower class as tower. No per-blade angle truth exists, so
     this reports what pitch makes of each: blades on the main rotor, set-aside blades, and the
@@ -163,13 +167,14 @@ def run_real(root: Path) -> list[str]:
 
     import cv2
 
-    lines = []
+    photos = []
     with open(root / "manifest.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     for row in rows:
+        name = Path(row["image"]).name
         m = cv2.imread(str(root / row["mask"]), cv2.IMREAD_UNCHANGED)
         if m is None:
-            lines.append(f"{row['image']}: mask unreadable")
+            photos.append({"image": name, "view": row["view"], "error": "mask unreadable"})
             continue
         n, lab = cv2.connectedComponents((m == 1).astype(np.uint8), connectivity=8)
         masks = [lab == k for k in range(1, n)] + [m == 2]
@@ -178,16 +183,40 @@ def run_real(root: Path) -> list[str]:
         try:
             res = pitch_from_instances(inst, area_threshold=200, expected_blades=0)
         except PerceptionError as e:
-            lines.append(f"{Path(row['image']).name:14s} {str(e)[:60]:60s} | {row['view']}")
+            photos.append({"image": name, "view": row["view"], "error": str(e)})
             continue
         phis = np.sort(res.phis)
         gaps = np.diff(np.concatenate([phis, phis[:1] + 360])) if len(phis) > 1 else []
-        merged = sum(b.elongation < 3 for b in res.blades)
-        lines.append(f"{Path(row['image']).name:14s} {len(res):d} blade(s), {len(res.other_rotor_blades)} "
-                     f"set aside, hub {res.hub_source:10s} φ gaps "
-                     f"{' '.join(f'{g:5.1f}' for g in gaps):20s}"
-                     f"{' (merged/stub)' if merged else '':14s}| {row['view']}")
-    return lines
+        photos.append({"image": name, "view": row["view"], "blades": len(res),
+                       "set_aside": len(res.other_rotor_blades), "hub": res.hub_source,
+                       "phi_gaps_deg": [round(float(g), 1) for g in gaps],
+                       "merged_or_stub": int(sum(b.elongation < 3 for b in res.blades))})
+    return photos
+
+
+def real_line(p: dict) -> str:
+    if "error" in p:
+        return f"{p['image']:14s} {p['error'][:60]:60s} | {p['view']}"
+    return (f"{p['image']:14s} {p['blades']:d} blade(s), {p['set_aside']} set aside, hub "
+            f"{p['hub']:10s} φ gaps {' '.join(f'{g:5.1f}' for g in p['phi_gaps_deg']):20s}"
+            f"{' (merged/stub)' if p['merged_or_stub'] else '':14s}| {p['view']}")
+
+
+def figures(r: dict) -> dict:
+    """One set's figures for the results file: errors in degrees as mean / p95 / max."""
+    def spread(e: np.ndarray) -> dict | None:
+        if len(e) == 0:
+            return None
+        return {"mean": float(e.mean()), "p95": float(np.percentile(e, 95)), "max": float(e.max())}
+
+    out = {k: r[k] for k in ("images", "blades", "failed", "failures", "flipped", "class_acc",
+                             "class_acc_eq7", "misclassified", "miss_max_dist", "ms_per_image")}
+    out.update(theta_err_deg=spread(r["theta"]), theta_eq7_err_deg=spread(r["theta_eq7"]),
+               phi_err_deg=spread(r["phi"]))
+    if "skipped" in r:
+        out.update(skipped=r["skipped"], wrong_rotor=r["wrong_rotor"], cut_blades=len(r["cut"]),
+                   cut_theta_err_deg=spread(r["cut"]))
+    return out
 
 
 def stats(e: np.ndarray) -> str:
@@ -227,6 +256,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="also N front views from the synthetic renderer, 640x480 (0: skip)")
     ap.add_argument("--real", default=str(Path(__file__).resolve().parents[2] / "shared" / "real-photos"),
                     help="folder of the real photos with manifest.csv (skipped if absent; '' skips)")
+    ap.add_argument("--out", default=None,
+                    help="results file (default benchmarks/results/pitch_accuracy.json)")
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
     front = run(a.n, a.seed, a.width, a.height, oblique=False)
@@ -234,20 +265,29 @@ def main(argv: list[str] | None = None) -> int:
     ok = (len(front["theta"]) > 0 and front["failed"] == 0 and front["theta"].mean() <= 0.5
           and front["class_acc"] >= 0.99
           and front["miss_max_dist"] <= 1.0 and front["flipped"] == 0)
+    result: dict = {"front": figures(front), "oblique": None, "synthetic": None, "real": None}
     if not a.no_oblique:
-        report("mildly oblique views (10-25° aside, ±10° up/down)",
-               run(a.n, a.seed + 1, a.width, a.height, oblique=True))
+        oblique = run(a.n, a.seed + 1, a.width, a.height, oblique=True)
+        report("mildly oblique views (10-25° aside, ±10° up/down)", oblique)
+        result["oblique"] = figures(oblique)
     if a.synth:
-        report("synthetic renders, front views with distant turbines (640x480)",
-               run_synth(a.synth, a.seed, 640, 480))
+        synth = run_synth(a.synth, a.seed, 640, 480)
+        report("synthetic renders, front views with distant turbines (640x480)", synth)
+        result["synthetic"] = figures(synth)
     real = Path(a.real)
     if a.real and (real / "manifest.csv").exists():
         print(f"== real photos in {real} (semantic masks; WTA dataset, Zampokas et al. 2022)")
-        for line in run_real(real):
-            print(f"   {line}")
+        photos = run_real(real)
+        for p in photos:
+            print(f"   {real_line(p)}")
+        result["real"] = {"photos": len(photos), "per_photo": photos}
+    seconds = time.perf_counter() - t0
     print(f"target (front): mean |θ error| <= 0.5°, class accuracy >= 99 % with misses within 1° "
-          f"of a boundary, φ never flipped: {'MET' if ok else 'NOT MET'} "
-          f"({time.perf_counter() - t0:.1f} s in all)")
+          f"of a boundary, φ never flipped: {'MET' if ok else 'NOT MET'} ({seconds:.1f} s in all)")
+    result.update(target_met=ok, seconds=seconds,
+                  settings={"n": a.n, "seed": a.seed, "width": a.width, "height": a.height,
+                            "synth": a.synth})
+    print(f"written: {save('pitch_accuracy', result, argv=argv, out=a.out)}")
     return 0 if ok else 1
 
 

@@ -33,14 +33,15 @@
    views (with and without completion). These photos are for evaluation only: never train on
    them or copy them into the repo.
 
-4. Edge refinement (``wtcli.segment.refine``, session 21; ``--no-refine`` skips it): every figure
+4. Edge refinement (``wtcli.segment.refine``; ``--no-refine`` skips it): every figure
    of the second look again with the instances' edges refined, as ``segment`` gives them
    (``synthetic.refined``, ``real.refined``), and the speed with it (``speed.ours_refined_...``;
    ``speed.ours_segment_images_per_s``: all that ``segment`` runs by default, the second look
    and the refiner, on the speed render and on a distant one, with its ratio to the stock
    network in ``speedup_vs_stock_segment``).
 
-Results are printed and written as JSON (``--out``, default benchmarks/results/segment_accuracy.json).
+Results are printed and written as JSON (``--out``, default benchmarks/results/segment_accuracy.json),
+with the command, date and machine (``benchmarks/_results.py``); ``docs/benchmarks.md`` shows them.
 
 ``--dev`` runs part 1 alone on the development seeds (``render_sample(7_000_000 + i, ...)``, the
 same mix): where errors are looked into and settings chosen, so the held-out set stays unseen.
@@ -62,7 +63,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from wtcli.errors import WtError  # noqa: E402
-from wtcli.jsonio import document, write_json  # noqa: E402
+from _results import save  # noqa: E402
 from wtcli.masks import Instances  # noqa: E402
 from wtcli.segment.data import DEV_SEED_BASE, HELDOUT_SEED_BASE, image_tensor  # noqa: E402
 from wtcli.segment.evaluate import Evaluator, mask_iou  # noqa: E402
@@ -136,7 +137,7 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
     # (docs/synth.md, label convention), so figures stay comparable across the change.
     ev_half, zev_half = Evaluator(0.5), Evaluator(0.5)
     zoom = {"ev": Evaluator(0.5), "right": 0, "errs": [], "by_fill": {"distant": [0, 0], "working": [0, 0]}}
-    # What `segment` gives since session 21: the second look's instances, edges refined.
+    # What `segment` gives by default: the second look's instances, edges refined.
     rf = {"ev": Evaluator(0.5), "half": Evaluator(0.5), "right": 0, "errs": [],
           "by_fill": {"distant": [0, 0], "working": [0, 0]}}
     views: dict[str, int] = {}
@@ -495,7 +496,7 @@ def main(argv: list[str] | None = None) -> dict:
         log(f"{'development' if a.dev else 'held-out'} synthetic set: {a.n} images")
         result["synthetic"] = synthetic(model, a.n, a.width, a.height, log, a.max_minutes,
                                         DEV_SEED_BASE if a.dev else HELDOUT_SEED_BASE, refiner)
-    write_json(a.out, document("wtinspect.benchmark.segment_accuracy", 1, result))
+    save("segment_accuracy", result, argv=argv, out=a.out, script=__file__)
     import json
 
     print(json.dumps(result, indent=1, default=str))

@@ -1,0 +1,283 @@
+"""Render ``docs/benchmarks.md`` from ``benchmarks/results/*.json``.
+
+    python benchmarks/report.py            # write docs/benchmarks.md
+    python benchmarks/report.py --check    # exit 1 if docs/benchmarks.md differs from what it renders
+
+Every headline figure of the project is listed in ``SECTIONS`` below: which results file holds it
+(written by the benchmark through ``benchmarks/_results.py``, with the command, date and machine
+that made it), under which key, and how it is shown. A benchmark whose results file does not
+exist yet is shown as "not measured yet" with the command that measures it, never with an old
+number. A results file that lacks a key named here is an error naming both, so the page and the
+files cannot drift apart unnoticed (``tests/test_benchmarks_report.py`` runs ``--check``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import difflib
+import json
+import re
+import sys
+import textwrap
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "results"
+DOC = ROOT / "docs" / "benchmarks.md"
+WIDTH = 100
+
+
+class ReportError(Exception):
+    """A results file that cannot be read, or lacks a figure this page shows."""
+
+
+@dataclass(frozen=True)
+class Figure:
+    label: str
+    keys: tuple[str, ...]   # dotted paths into the results file; ``[k=v]`` picks a list item
+    fmt: str                # str.format template over the values, in the order of ``keys``
+    goal: str = ""
+
+
+@dataclass(frozen=True)
+class Section:
+    title: str
+    name: str               # benchmarks/NAME.py writes benchmarks/results/NAME.json
+    command: str            # the command that measures it (shown while not measured yet)
+    about: str
+    figures: tuple[Figure, ...] = field(default_factory=tuple)
+
+
+F = Figure
+SECTIONS: tuple[Section, ...] = (
+    Section(
+        "Segmentation: held-out renders", "segment_accuracy",
+        "python benchmarks/segment_accuracy.py --threads 2",
+        "The shipped segmenter and edge refiner as `segment` runs them (second look, mirror pass, "
+        "refined edges, bfloat16 trunk where the CPU has it) on 300 renders at 640 × 480 that no "
+        "training run saw (seeds 9 000 000 +, 200 of them front views). Mask IoU and AP50 against "
+        "the renderer's outline labels; blade count and angle through segment → contours → pitch.",
+        (F("mask IoU blade / tower / nacelle",
+           ("synthetic.refined.blade_mask_iou", "synthetic.refined.tower_mask_iou",
+            "synthetic.refined.nacelle_mask_iou"), "{:.3f} / {:.3f} / {:.3f}", "≥ 0.85 / 0.80 / 0.80"),
+         F("AP50 blade / tower / nacelle",
+           ("synthetic.refined.blade_ap50", "synthetic.refined.tower_ap50",
+            "synthetic.refined.nacelle_ap50"), "{:.3f} / {:.3f} / {:.3f}"),
+         F("front views read with the right blade count",
+           ("synthetic.front_right_blade_count", "synthetic.front_views"), "{:.1%} of {}", "≥ 95 %"),
+         F("blade angle θ error, mean / median / p95",
+           ("synthetic.theta_error_mean_deg", "synthetic.theta_error_median_deg",
+            "synthetic.theta_error_p95_deg", "synthetic.theta_blades_measured"),
+           "{:.2f}° / {:.2f}° / {:.2f}° ({} blades)", "mean ≤ 2°"),
+         F("mask IoU without the edge refiner, blade / tower / nacelle",
+           ("synthetic.zoom.blade_mask_iou", "synthetic.zoom.tower_mask_iou",
+            "synthetic.zoom.nacelle_mask_iou"), "{:.3f} / {:.3f} / {:.3f}"))),
+    Section(
+        "Segmentation: real photos", "segment_accuracy",
+        "python benchmarks/segment_accuracy.py --threads 2",
+        "The same run on 38 real UAV photos (1920 × 1080) of the WTA dataset (G. Zampokas et al., "
+        "\"WTA/TLA: A UAV-captured Dataset for Semantic Segmentation of Energy Infrastructure\", "
+        "ICUAS 2022, doi:10.1109/ICUAS54217.2022.9836096), never trained on; tower is scored as "
+        "tower ∪ nacelle against the photos' tower class.",
+        (F("blade / tower IoU", ("real.refined.blade_iou", "real.refined.tower_iou"),
+           "{:.3f} / {:.3f}", "≥ 0.75 each"),
+         F("blade IoU on the distant photos", ("real.refined.blade_iou_distant", "real.distant_photos"),
+           "{:.3f} ({} photos)"),
+         F("front photos read with 3 blades", ("real.refined.front_blade_count_3", "real.front_views"),
+           "{:.0%} of {}"))),
+    Section(
+        "Segmentation: speed", "segment_accuracy",
+        "python benchmarks/segment_accuracy.py --threads 2",
+        "One 1024 × 683 render, images per second in one process with the same thread count, "
+        "against torchvision's stock `maskrcnn_resnet50_fpn` on the same input. Timings move by "
+        "10–20 % between runs on a shared machine; the ratio is the comparison.",
+        (F("stock `maskrcnn_resnet50_fpn`", ("speed.stock_r50_fpn_images_per_s",), "{:.3f} images/s"),
+         F("the network with its mirror pass", ("speed.speedup_vs_stock", "speed.ours_images_per_s"),
+           "{:.1f}× ({:.2f} images/s)", "≥ 5×"),
+         F("the same, edges refined", ("speed.speedup_vs_stock_refined", "speed.ours_refined_images_per_s"),
+           "{:.1f}× ({:.2f} images/s)", "≥ 5×"),
+         F("the same, float32 (a CPU without native bfloat16)",
+           ("speed.speedup_vs_stock_fp32", "speed.ours_fp32_images_per_s"), "{:.1f}× ({:.2f} images/s)"),
+         F("without the mirror pass (`--no-flip`)",
+           ("speed.speedup_vs_stock_no_flip", "speed.ours_no_flip_images_per_s"), "{:.1f}× ({:.2f} images/s)"),
+         F("all that `segment` runs by default (second look, refiner), this render / a distant one",
+           ("speed.speedup_vs_stock_segment.this render", "speed.speedup_vs_stock_segment.a distant render"),
+           "{:.1f}× / {:.1f}×"))),
+    Section(
+        "Blade angle from masks", "pitch_accuracy",
+        "python benchmarks/pitch_accuracy.py",
+        "`contours` + `pitch` on exact masks of random turbines seen from the front (rotor 40–90 % "
+        "of the frame height) and mildly oblique, and on front renders with distant turbines: the "
+        "error of the method alone, without segmentation.",
+        (F("front views: θ error mean / p95 / max",
+           ("front.theta_err_deg.mean", "front.theta_err_deg.p95", "front.theta_err_deg.max",
+            "front.blades"), "{:.3f}° / {:.3f}° / {:.3f}° ({} blades)", "mean ≤ 0.5°"),
+         F("front views: class accuracy, φ flipped", ("front.class_acc", "front.flipped"),
+           "{:.2%}, {} flipped", "≥ 99 %, none"),
+         F("oblique views: θ error mean / p95", ("oblique.theta_err_deg.mean", "oblique.theta_err_deg.p95"),
+           "{:.3f}° / {:.3f}°"),
+         F("renders with distant turbines: θ error mean / p95, blades taken from another turbine",
+           ("synthetic.theta_err_deg.mean", "synthetic.theta_err_deg.p95", "synthetic.wrong_rotor"),
+           "{:.3f}° / {:.3f}°, {}"),
+         F("time per image (contours + pitch)", ("front.ms_per_image",), "{:.1f} ms"))),
+    Section(
+        "Planning time", "plan_benchmark",
+        "python benchmarks/plan_benchmark.py",
+        "`plan_mission` on random sites of 1, 10 and 100 turbines, wall and CPU seconds.",
+        (F("1 turbine", ("timing[turbines=1].seconds", "timing[turbines=1].cpu_seconds"),
+           "{:.2f} s wall, {:.2f} s CPU"),
+         F("10 turbines", ("timing[turbines=10].seconds", "timing[turbines=10].cpu_seconds"),
+           "{:.2f} s wall, {:.2f} s CPU"),
+         F("100 turbines", ("timing[turbines=100].seconds", "timing[turbines=100].cpu_seconds"),
+           "{:.2f} s wall, {:.2f} s CPU"),
+         F("adaptive plan against the fixed \"Y\" pattern: mean coverage",
+           ("adaptive_vs_fixed_y.adaptive.coverage_mean", "adaptive_vs_fixed_y.fixed-y.coverage_mean"),
+           "{:.1%} against {:.1%}"))),
+    Section(
+        "Coverage", "plan_coverage",
+        "python benchmarks/plan_coverage.py",
+        "The planner's predicted coverage of every blade side over random single turbines, with "
+        "the settings `wtinspect plan` uses.",
+        (F("blade coverage, mean over cases", ("summary.blade_average_mean",), "{:.1%}"),
+         F("worst blade side, mean / min over cases", ("summary.min_side_mean", "summary.min_side_min"),
+           "{:.1%} / {:.1%}"),
+         F("clearance violations", ("summary.violations",), "{}", "0"))),
+    Section(
+        "Plan safety over random sites", "plan_property",
+        "python benchmarks/plan_property.py",
+        "Random sites of 1–3 turbines and 1–3 UAVs, every waypoint and leg checked against every "
+        "turbine with the one turbine model.",
+        (F("cases planned / refused", ("summary.planned", "summary.plan_errors"), "{} / {}"),
+         F("clearance or gimbal violations", ("summary.violations",), "{}", "0"),
+         F("smallest margin over the safe distance", ("summary.min_margin_over_safe_distance_m",),
+           "{:.2f} m", "≥ 0"))),
+    Section(
+        "Flight: the paper's scenarios", "fly_paper_table",
+        "python benchmarks/fly_paper_table.py",
+        "The four shipped scenarios (paper-s1 … paper-s4) planned and flown with the PID "
+        "controller (eq. 10) and a manual pilot, beside the paper's Table 1.",
+        (F("strong wind (paper-s2), automated: mean deviation",
+           ("rows[scenario=paper-s2].ours.automated.deviation_m",), "{:.2f} m", "≤ 0.5 m"),
+         F("strong wind (paper-s2), automated: clearance violations",
+           ("rows[scenario=paper-s2].automated_safety.violations",), "{}", "0"),
+         F("coverage, automated, paper-s1 / s2 / s3 / s4",
+           ("rows[scenario=paper-s1].ours.automated.coverage_pct",
+            "rows[scenario=paper-s2].ours.automated.coverage_pct",
+            "rows[scenario=paper-s3].ours.automated.coverage_pct",
+            "rows[scenario=paper-s4].ours.automated.coverage_pct"),
+           "{:.1f} / {:.1f} / {:.1f} / {:.1f} %", "≥ 97 %"))),
+    Section(
+        "Flight simulation speed", "fly_speed",
+        "python benchmarks/fly_speed.py",
+        "A 20-minute inspection flown in strong turbulent wind (100 Hz physics, 50 Hz control), "
+        "then measured.",
+        (F("fly + measure, CPU seconds", ("total_cpu_s",), "{:.2f} s", "< 2 s"),
+         F("deviation from the planned path, mean / max", ("deviation_mean_m", "deviation_max_m"),
+           "{:.3f} / {:.2f} m"))),
+)
+
+
+def lookup(doc: Any, path: str, where: str) -> Any:
+    """The value at a dotted ``path`` (keys may hold spaces; ``name[k=v]`` takes the list item
+    whose ``k`` reads ``v``)."""
+    cur = doc
+    for part in path.split("."):
+        sel = None
+        if part.endswith("]") and "[" in part:
+            part, sel = part[:-1].split("[", 1)
+        if not isinstance(cur, dict) or part not in cur:
+            raise ReportError(f"{where}: no `{path}` (benchmarks/report.py shows it)")
+        cur = cur[part]
+        if sel is not None:
+            k, v = sel.split("=", 1)
+            hits = [x for x in (cur or []) if isinstance(x, dict) and str(x.get(k)) == v]
+            if not hits:
+                raise ReportError(f"{where}: no item with {k} = {v} in `{path}`")
+            cur = hits[0]
+    if cur is None:
+        raise ReportError(f"{where}: `{path}` is null (that part of the benchmark did not run)")
+    return cur
+
+
+def load(name: str, results: Path) -> dict | None:
+    path = results / f"{name}.json"
+    if not path.exists():
+        return None
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ReportError(f"{path}: cannot read ({e})") from None
+    for key in ("command", "date", "machine"):
+        if key not in doc.get("measured", {}):
+            raise ReportError(f"{path}: no `measured.{key}` (write it with benchmarks/_results.py)")
+    return doc
+
+
+def render(results: Path = RESULTS) -> str:
+    rel = results.relative_to(ROOT) if results.is_relative_to(ROOT) else results
+    out = ["# Benchmarks", "",
+           "Every headline figure of `wtinspect`, with the command, date and machine that measured it.",
+           f"This page is generated from `{rel}/*.json` by `python benchmarks/report.py`; do not edit",
+           "it by hand (`tests/test_benchmarks_report.py` fails when it differs from the results files).",
+           "Each benchmark writes its results file through `benchmarks/_results.py`; run the command",
+           "shown, then `python benchmarks/report.py`, and commit both.", ""]
+    for s in SECTIONS:
+        out += [f"## {s.title}", "", *textwrap.wrap(s.about, WIDTH), ""]
+        doc = load(s.name, results)
+        if doc is None:
+            out += [*textwrap.wrap(f"Not measured yet: run `{s.command}` (it writes "
+                                   f"`{rel}/{s.name}.json`).", WIDTH), ""]
+            out += ["| figure | value | goal |", "| --- | --- | --- |"]
+            out += [f"| {f.label} | not measured yet | {f.goal or '—'} |" for f in s.figures]
+            out.append("")
+            continue
+        m = doc["measured"]
+        machine = m["machine"]["summary"] if isinstance(m["machine"], dict) else str(m["machine"])
+        out += [*textwrap.wrap(f"Measured {m['date']} by `{m['command']}` on a {machine}"
+                               f" (`{rel}/{s.name}.json`, tool {doc.get('tool_version', '?')}).",
+                               WIDTH, break_on_hyphens=False), "",
+                "| figure | value | goal |", "| --- | --- | --- |"]
+        where = f"{rel}/{s.name}.json"
+        for f in s.figures:
+            values = [lookup(doc, k, where) for k in f.keys]
+            try:
+                shown = f.fmt.format(*values)
+            except (ValueError, TypeError, IndexError) as e:
+                raise ReportError(f"{where}: {f.keys} cannot be shown as {f.fmt!r} ({e})") from None
+            shown = re.sub(r"(\d)%", r"\1 %", shown)  # 96.0 %, as the rest of the docs write it
+            out.append(f"| {f.label} | {shown} | {f.goal or '—'} |")
+        out.append("")
+    return "\n".join(out)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--check", action="store_true",
+                    help="do not write: exit 1 if the page differs from what the results files give")
+    ap.add_argument("--results", type=Path, default=RESULTS, help="folder of the results files")
+    ap.add_argument("--out", type=Path, default=DOC, help="the page to write or check")
+    a = ap.parse_args(argv)
+    try:
+        text = render(a.results)
+    except ReportError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 3
+    if a.check:
+        have = a.out.read_text(encoding="utf-8") if a.out.exists() else ""
+        if have != text:
+            diff = difflib.unified_diff(have.splitlines(), text.splitlines(), str(a.out),
+                                        "rendered", lineterm="", n=1)
+            print("\n".join(list(diff)[:40]), file=sys.stderr)
+            print(f"{a.out} differs from {a.results}: run `python benchmarks/report.py`",
+                  file=sys.stderr)
+            return 1
+        return 0
+    a.out.write_text(text, encoding="utf-8")
+    print(f"wrote {a.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

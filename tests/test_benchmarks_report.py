@@ -1,0 +1,88 @@
+"""docs/benchmarks.md is what benchmarks/report.py renders from benchmarks/results/*.json, and
+the results files name the command, date and machine behind every figure."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _load(name: str):
+    spec = importlib.util.spec_from_file_location(f"bench_{name}", ROOT / "benchmarks" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod  # dataclasses look their module up there
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def report():
+    return _load("report")
+
+
+@pytest.fixture(scope="module")
+def results():
+    return _load("_results")
+
+
+def test_docs_page_matches_the_results_files(report):
+    assert report.main(["--check"]) == 0, "run `python benchmarks/report.py` and commit docs/benchmarks.md"
+
+
+def test_every_results_file_is_shown_and_says_how_it_was_made(report):
+    shown = {s.name for s in report.SECTIONS}
+    for path in sorted((ROOT / "benchmarks" / "results").glob("*.json")):
+        assert path.stem in shown, f"{path.name}: no section of benchmarks/report.py shows it"
+        m = json.loads(path.read_text())["measured"]
+        assert m["command"].startswith(f"python benchmarks/{path.stem}.py"), path.name
+        assert m["date"] and m["machine"]["summary"], path.name
+
+
+def test_a_benchmark_not_run_yet_gives_its_command_not_a_number(report, tmp_path):
+    text = report.render(tmp_path)
+    for s in report.SECTIONS:
+        assert f"Not measured yet: run `{s.command}`" in text.replace("\n", " ")
+    assert "| mask IoU blade / tower / nacelle | not measured yet |" in text
+
+
+def test_save_then_render(report, results, tmp_path, monkeypatch):
+    fig = {"speed": {}, "synthetic": {}}
+    doc = json.loads((ROOT / "benchmarks" / "results" / "segment_accuracy.json").read_text())
+    for k in ("speed", "synthetic", "real"):
+        fig[k] = doc[k]
+    monkeypatch.setattr(sys, "argv", ["pytest"])
+    path = results.save("segment_accuracy", fig, argv=["--n", "3"], out=tmp_path / "segment_accuracy.json")
+    saved = json.loads(path.read_text())
+    assert saved["schema"] == "wtinspect.benchmark.segment_accuracy"
+    assert saved["measured"]["command"] == "python benchmarks/segment_accuracy.py --n 3"
+    assert saved["measured"]["machine"]["cores"] >= 1
+    text = report.render(tmp_path)
+    assert "by `python benchmarks/segment_accuracy.py --n 3`" in text.replace("\n", " ")
+    assert "| mask IoU blade / tower / nacelle | 0.854 / 0.914 / 0.834 |" in text
+
+
+def test_a_results_file_without_a_shown_figure_is_an_error(report, results, tmp_path, capsys):
+    results.save("plan_property", {"summary": {"planned": 3}}, argv=[], out=tmp_path / "plan_property.json")
+    with pytest.raises(report.ReportError, match=r"plan_property.json: no `summary.plan_errors`"):
+        report.render(tmp_path)
+    assert report.main(["--check", "--results", str(tmp_path), "--out", str(tmp_path / "x.md")]) == 3
+    assert "summary.plan_errors" in capsys.readouterr().err
+
+
+def test_check_fails_on_a_stale_page(report, tmp_path):
+    page = tmp_path / "benchmarks.md"
+    page.write_text(report.render().replace("0.854", "0.860"))
+    assert report.main(["--check", "--out", str(page)]) == 1
+    assert report.main(["--out", str(page)]) == 0
+    assert report.main(["--check", "--out", str(page)]) == 0
+
+
+def test_save_refuses_a_measured_key(results, tmp_path):
+    with pytest.raises(ValueError, match="measured"):
+        results.save("x", {"measured": 1}, argv=[], out=tmp_path / "x.json")
