@@ -1,6 +1,7 @@
 """Small helpers every YAML reader uses, so every config error reads the same way:
 ``turbines.yaml: turbines[1].hub_height: expected a number in [10, 250], got -5``.
-Unknown keys get a "did you mean" hint. ``yaml.safe_load`` only."""
+Unknown keys get a "did you mean" hint. Safe loading only (no ``!!python`` tags), duplicate
+keys refused, aliases limited (``load_yaml``); values quoted in messages are bounded."""
 
 from __future__ import annotations
 
@@ -13,8 +14,91 @@ from typing import Any, Iterable, Sequence
 import yaml
 
 from wtcli.errors import ConfigError
+from wtcli.jsonio import shown
 
 _MISSING = object()
+
+# The most values a YAML document may hold once its aliases are expanded. A settings file has
+# hundreds; ~1 KB of nested aliases (an "alias bomb") expands to billions, which any code
+# walking the data (a check, an error message, a deep copy) would take minutes and gigabytes
+# over. The document is refused before anything is built from it.
+MAX_YAML_VALUES = 100_000
+
+
+class _Refused(Exception):
+    def __init__(self, problem: str, mark: Any = None):
+        super().__init__(problem)
+        self.problem, self.problem_mark = problem, mark
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses a key given twice in one mapping (YAML 1.2 forbids it;
+    PyYAML would keep the last one silently, dropping e.g. a first ``turbines:`` block)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        seen: dict[Any, Any] = {}
+        for key_node, _ in node.value:
+            if isinstance(key_node, yaml.ScalarNode) and key_node.tag != "tag:yaml.org,2002:merge":
+                key = (key_node.tag, key_node.value)
+                if key in seen:
+                    raise _Refused(f"duplicate key {shown(key_node.value)} (first given on line "
+                                   f"{seen[key].line + 1})", key_node.start_mark)
+                seen[key] = key_node.start_mark
+        return super().construct_mapping(node, deep=deep)
+
+
+def _expanded_size(root: yaml.Node) -> None:
+    """Refuse a node graph whose aliases expand past MAX_YAML_VALUES, or refer to themselves.
+    Shared nodes are counted once per reference (that is what the data will look like),
+    memoised, so the check itself takes time proportional to the text."""
+    size: dict[int, int] = {}
+    active: set[int] = set()
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    while stack:
+        node, done = stack.pop()
+        key = id(node)
+        if done:
+            active.discard(key)
+            children = _children(node)
+            total = 1 + sum(size[id(c)] for c in children)
+            if total > MAX_YAML_VALUES:
+                raise _Refused(f"its aliases expand to over {MAX_YAML_VALUES:,} values; "
+                               "write the values out (an alias bomb is refused)", node.start_mark)
+            size[key] = total
+            continue
+        if key in size:
+            continue
+        if key in active:
+            raise _Refused("an alias refers to the value it is part of", node.start_mark)
+        active.add(key)
+        stack.append((node, True))
+        for c in _children(node):
+            if id(c) in active:
+                raise _Refused("an alias refers to the value it is part of", c.start_mark)
+            if id(c) not in size:
+                stack.append((c, False))
+
+
+def _children(node: yaml.Node) -> list[yaml.Node]:
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    if isinstance(node, yaml.MappingNode):
+        return [n for pair in node.value for n in pair]
+    return []
+
+
+def parse_yaml(text: str) -> Any:
+    """``text`` -> Python data, safely: no tags beyond YAML's own, no duplicate keys, no alias
+    expanding past MAX_YAML_VALUES. Raises yaml.YAMLError or _Refused."""
+    loader = _StrictLoader(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        _expanded_size(node)
+        return loader.construct_document(node)
+    finally:
+        loader.dispose()
 
 
 def load_yaml(path: str | Path) -> Any:
@@ -23,15 +107,21 @@ def load_yaml(path: str | Path) -> Any:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise ConfigError(f"{path}: file not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ConfigError(f"{path}: cannot read ({e.__class__.__name__})") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: is a folder, expected a YAML file") from None
+    except OSError as e:
+        raise ConfigError(f"{path}: cannot read ({e.strerror or e.__class__.__name__})") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not valid YAML (not UTF-8 text)") from None
     try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as e:
+        return parse_yaml(text)
+    except (yaml.YAMLError, _Refused) as e:
         mark = getattr(e, "problem_mark", None)
         at = f" (line {mark.line + 1}, column {mark.column + 1})" if mark else ""
         problem = getattr(e, "problem", None) or str(e).splitlines()[0]
         raise ConfigError(f"{path}: not valid YAML{at}: {problem}") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: not valid YAML: nested too deeply") from None
 
 
 def merge(base: dict, over: dict) -> dict:
@@ -46,13 +136,15 @@ def merge(base: dict, over: dict) -> dict:
 
 
 def hint(word: str, choices: Iterable[str]) -> str:
+    if not isinstance(word, str) or len(word) > 100:
+        return ""
     close = difflib.get_close_matches(str(word), list(choices), n=1, cutoff=0.6)
     return f" (did you mean '{close[0]}'?)" if close else ""
 
 
 def need_mapping(value: Any, where: str) -> dict:
     if not isinstance(value, dict):
-        raise ConfigError(f"{where}: expected a mapping of keys, got {type(value).__name__}")
+        raise ConfigError(f"{where}: expected a mapping of keys, got {shown(value)}")
     return value
 
 
@@ -61,7 +153,7 @@ def check_keys(mapping: dict, allowed: Iterable[str], where: str,
     allowed = list(allowed)
     for key in mapping:
         if key not in allowed:
-            raise ConfigError(f"{where}: unknown key '{key}'{hint(key, allowed)}; allowed: "
+            raise ConfigError(f"{where}: unknown key {shown(key)}{hint(key, allowed)}; allowed: "
                               f"{', '.join(allowed)}")
     for key in required:
         if key not in mapping:
@@ -81,7 +173,7 @@ def number(mapping: dict, key: str, where: str, lo: float | None = None, hi: flo
     if isinstance(v, bool) or not ok or (not integer and not math.isfinite(v)) \
             or (lo is not None and (v <= lo if lo_open else v < lo)) \
             or (hi is not None and v > hi):
-        raise ConfigError(f"{where}.{key}: expected {kind}{rng}, got {v!r}")
+        raise ConfigError(f"{where}.{key}: expected {kind}{rng}, got {shown(v)}")
     return int(v) if integer else float(v)
 
 
@@ -94,7 +186,7 @@ def choice(mapping: dict, key: str, where: str, choices: Sequence[str],
     v = mapping[key]
     if v not in choices:
         raise ConfigError(f"{where}.{key}: expected one of {', '.join(map(str, choices))}, "
-                          f"got {v!r}{hint(v, map(str, choices))}")
+                          f"got {shown(v)}{hint(v, map(str, choices)) if isinstance(v, str) else ''}")
     return v
 
 
@@ -105,7 +197,7 @@ def string(mapping: dict, key: str, where: str, default: Any = _MISSING) -> Any:
         return default
     v = mapping[key]
     if not isinstance(v, (str, int)) or isinstance(v, bool) or str(v) == "":
-        raise ConfigError(f"{where}.{key}: expected a non-empty string, got {v!r}")
+        raise ConfigError(f"{where}.{key}: expected a non-empty string, got {shown(v)}")
     return str(v)
 
 
@@ -117,7 +209,7 @@ def vector(mapping: dict, key: str, where: str, length: int, default: Any = _MIS
     v = mapping[key]
     if not isinstance(v, (list, tuple)) or len(v) != length or not all(
             isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v):
-        raise ConfigError(f"{where}.{key}: expected a list of {length} numbers, got {v!r}")
+        raise ConfigError(f"{where}.{key}: expected a list of {length} numbers, got {shown(v)}")
     return [float(x) for x in v]
 
 
