@@ -40,7 +40,7 @@ from wtcli.geometry import BLADE_SIDES, Camera, Turbine  # noqa: E402
 from wtcli.plan.config import Fleet, Mission, Settings  # noqa: E402
 from wtcli.plan.mission import _photos_of, pass_params, plan_mission  # noqa: E402
 from wtcli.geometry.coverage import measure_coverage  # noqa: E402
-from wtcli.plan.safety import Site  # noqa: E402
+from wtcli.plan.clearance import Site  # noqa: E402
 
 CAM = Camera(5456, 3632, 16, 23.2)
 

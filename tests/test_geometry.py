@@ -304,13 +304,13 @@ def test_a_pickled_turbine_gives_the_kernels_the_same_types():
 
 def test_warm_up_calls_every_kernel():
     from wtcli.geometry import clearance_kernel, coverage_kernel
-    from wtcli.plan import safety_kernel
+    from wtcli.plan import clearance_site_kernel
     from wtcli.warmup import warm_up
 
     assert warm_up() >= 0
     for k in (clearance_kernel.clearance, clearance_kernel.trace, coverage_kernel.near_pairs,
-              safety_kernel.clearance, safety_kernel.near, safety_kernel.segment_clearance,
-              safety_kernel.stretches, safety_kernel.ground_index):
+              clearance_site_kernel.clearance, clearance_site_kernel.near, clearance_site_kernel.segment_clearance,
+              clearance_site_kernel.stretches, clearance_site_kernel.ground_index):
         assert k.signatures, k
 
 

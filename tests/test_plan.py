@@ -156,7 +156,7 @@ def test_root_trailing_edge_miss_is_out_of_sight():
     target (the planner's margin for the flight's position error)."""
     from wtcli.geometry.coverage import measure_coverage
     from wtcli.plan.mission import _photos_of, pass_params
-    from wtcli.plan.safety import Site
+    from wtcli.plan.clearance import Site
 
     t = make_turbine(az=0, yaw=0)
     m = Mission((t,), CAM, settings=Settings(min_side_coverage=0.0))
@@ -368,7 +368,7 @@ def _odd_site(rng: np.random.Generator, n: int):
     """n turbines a few hundred metres apart, boxes overlapping; every third with odd part sizes
     (a wide chord, a tiny nacelle and hub, a thick tower); one to four blades (the compiled site
     query stacks turbines of different blade counts)."""
-    from wtcli.plan.safety import Site
+    from wtcli.plan.clearance import Site
 
     ts = []
     for i in range(n):
@@ -413,7 +413,7 @@ def _every_turbine(site, P: np.ndarray, cap: float | None) -> np.ndarray:
 
 def _check_site(site, rng: np.random.Generator, m: int) -> None:
     from wtcli.geometry.turbine import segment_lower_bound
-    from wtcli.plan.safety import enclosing_box, part_boxes
+    from wtcli.plan.clearance import enclosing_box, part_boxes
 
     for t in site.turbines:  # the boxes hold the whole turbine (its surface, hence the solid)
         S = t.surface_samples(1.0).points
@@ -743,7 +743,7 @@ def test_cli_photo_with_a_blade_missed_by_the_segmenter_still_plans(cli, tmp_pat
 def test_site_ground_z_is_the_nearest_base_as_by_comparing_all(layout):
     """Site.ground_z finds the nearest ground point through a grid of cells; it must pick the
     same point as comparing every one (the first of equally near ones), wherever the query is."""
-    from wtcli.plan.safety import Site
+    from wtcli.plan.clearance import Site
 
     rng = np.random.default_rng(3)
     if layout == "grid":
@@ -773,7 +773,7 @@ def _hilly_site():
 
 
 def test_legs_above_ground_sees_a_leg_cross_higher_ground():
-    from wtcli.plan.safety import Site
+    from wtcli.plan.clearance import Site
 
     site = Site(_hilly_site(), launch=np.array([-150.0, 0.0, 0.0]))
     p0 = np.array([[0.0, 30.0, 6.0], [0.0, 30.0, 50.0], [0.0, 30.0, 6.0]])
@@ -852,7 +852,7 @@ def test_unreachable_root_station_is_dropped_and_coverage_decides():
 def test_legs_above_ground_is_exact_against_dense_sampling():
     """The leg test works out, per leg, the stretch over each base's flat ground (the nearest
     base's region, convex) instead of sampling; it must agree with samples every 5 cm."""
-    from wtcli.plan.safety import Site
+    from wtcli.plan.clearance import Site
 
     rng = np.random.default_rng(3)
     for n in (3, 20):
@@ -896,7 +896,7 @@ def test_return_from_higher_ground_past_a_turbine_holds_its_height():
     and a detour that descends on the way dips below T3's ground before leaving it. The way
     found must clear both, checked densely (was refused: 'no safe ... path back')."""
     from wtcli.plan.paths import connect
-    from wtcli.plan.safety import Site
+    from wtcli.plan.clearance import Site
 
     ts = _stepped_row()
     launch = np.array([-56.8, -13.6, 2.3])
@@ -912,7 +912,7 @@ def test_return_over_a_higher_base_between_two_lower_ones_climbs_over_its_ground
     base 6-9 m higher than both ends: a chain held at the ends' height stays too low over T2's
     ground (property suite, seed 10 394: was refused)."""
     from wtcli.plan.paths import connect
-    from wtcli.plan.safety import Site
+    from wtcli.plan.clearance import Site
 
     ts = (make_turbine(az=0.0, yaw=342.3, tid="T1", base=(0.0, -8.3, 1.9), hub_height=117.0,
                        rotor_diameter=145.0),
@@ -933,7 +933,7 @@ def test_long_leg_goes_round_a_tower_in_line_where_it_stands():
     within 40 m of it), not 7 m sideways over the whole length (14 m longer, as the search from
     the middle and the ends found)."""
     from wtcli.plan.paths import connect
-    from wtcli.plan.safety import Site
+    from wtcli.plan.clearance import Site
 
     t = make_turbine(az=0.0, yaw=90.0, base=(300.0, 0.0, 0.0))
     site = Site((t,), launch=np.array([0.0, -100.0, 0.0]))
@@ -948,7 +948,7 @@ def test_long_leg_blocked_at_both_ends_is_detoured_at_each():
     """A 2 km transit with a tower in line 150 m from each end: two blocked stretches, each
     detoured on its own (short searches), straight in between; safe at every 5 cm."""
     from wtcli.plan.paths import connect
-    from wtcli.plan.safety import Site
+    from wtcli.plan.clearance import Site
 
     ts = (make_turbine(az=0.0, yaw=90.0, base=(150.0, 0.0, 0.0)),
           make_turbine(az=0.0, yaw=90.0, base=(1850.0, 0.0, 0.0), tid="T2"))
@@ -977,7 +977,7 @@ def test_gimbal_that_looks_up_30_deg_is_never_asked_for_more():
     down is seen head-on only from below, looking up 70 deg (blade at 200 deg): the planner must
     see it obliquely instead, every photo aimed within the gimbal's reach, and still cover it."""
     from wtcli.plan.mission import _chunks, pass_params
-    from wtcli.plan.safety import Site
+    from wtcli.plan.clearance import Site
 
     m = _gimbal_mission((80.0, 200.0, 320.0), 30.0)
     pp, gsd, _ = pass_params(m)
@@ -1009,7 +1009,7 @@ def test_horizontal_blade_face_down_is_refused_naming_the_gimbal():
 def test_site_clearance_of_a_nan_point_is_nan():
     """A NaN point never reads as clear (it falls outside the grid, and read the cull
     distance, 60 m, before)."""
-    from wtcli.plan.safety import Site
+    from wtcli.plan.clearance import Site
 
     site = Site([make_turbine(tid="T1")])
     got = site.clearance(np.array([[np.nan, 0.0, 80.0], [0.0, 0.0, 500.0]]))
@@ -1022,7 +1022,7 @@ def test_site_queries_far_outside_the_grid():
     cells) read the horizon, as any point outside the grid; their ground is the first base's
     (np.argmin's answer), and a photo taken there sees nothing."""
     from wtcli.geometry.coverage import measure_coverage
-    from wtcli.plan.safety import Site
+    from wtcli.plan.clearance import Site
 
     ts = [make_turbine(tid=f"T{i}", base=(300.0 * i, 0.0, float(i))) for i in range(20)]
     site = Site(ts)
@@ -1111,3 +1111,18 @@ def test_a_mission_built_in_code_plans_like_a_yaml_that_leaves_keys_out():
                        "rotor_diameter_m": 90, "yaw_deg": 0}]}
     m = mission_from_dict(d)
     assert m.settings == Settings() and m.fleet == Fleet()
+
+
+def test_clearance_to_parts_is_the_sites_clearance_with_the_part_named():
+    from wtcli.plan.clearance import HORIZON_M, Site, clearance_to_parts
+
+    rng = np.random.default_rng(3)
+    ts = [make_turbine(az=10.0, tid="T1"), make_turbine(az=70.0, yaw=40.0, tid="T2", base=(250, 0, 0))]
+    P = np.vstack([t.hub_center + rng.normal(0, 30, (200, 3)) for t in ts]
+                  + [np.array([[5000.0, 0.0, 50.0]])])
+    d, part = clearance_to_parts(ts, P)
+    assert np.allclose(d, Site(ts).clearance(P), atol=1e-9)
+    for i in rng.choice(len(P) - 1, 25, replace=False):
+        name, dist = Site(ts).nearest_part(P[i])
+        assert part[i] == name.replace(" ", "/") and abs(min(dist, HORIZON_M) - d[i]) < 1e-9
+    assert d[-1] == HORIZON_M and part[-1] == ""

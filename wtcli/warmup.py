@@ -3,7 +3,7 @@
     python -m wtcli.warmup
 
 The clearance, site and coverage kernels (``wtcli/geometry/*_kernel.py``,
-``wtcli/plan/safety_kernel.py``) are compiled on a machine's first use, 10-20 s on two cores,
+``wtcli/plan/clearance_site_kernel.py``) are compiled on a machine's first use, 10-20 s on two cores,
 then loaded from numba's cache (the package's ``__pycache__``) in a fraction of a second.
 ``scripts/setup-venv.sh`` runs this, so that a user's first ``plan`` or ``fly`` does not pay
 it. It goes through the same calls the planner makes, so the argument types (and hence the
@@ -21,7 +21,7 @@ def warm_up() -> float:
     """Call every kernel once on a small site; returns the seconds it took."""
     from wtcli.geometry import Camera, Turbine, look_at_rotation
     from wtcli.geometry.coverage import measure_coverage
-    from wtcli.plan.safety import Site
+    from wtcli.plan.clearance import Site
 
     t0 = time.perf_counter()
     ts = [Turbine.with_rotor_azimuth(30.0 * i, id=f"T{i}", base=(300.0 * i, 0.0, 0.0),

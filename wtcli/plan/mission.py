@@ -32,7 +32,7 @@ from wtcli.geometry.coverage import Coverage, measure_coverage
 from wtcli.plan.config import Mission
 from wtcli.plan.paths import (WP, Chunk, PassParams, _Blocked, add_gap_views, blade_chunk,
                               connect, gap_plan, nacelle_chunk, tower_chunk)
-from wtcli.plan.safety import Site
+from wtcli.plan.clearance import Site
 from wtcli.plan.zone import initial_point, zone
 from wtcli.pitch import classify_theta
 from wtcli.plan_file import Plan, Route

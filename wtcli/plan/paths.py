@@ -36,7 +36,7 @@ import numpy as np
 from wtcli.geometry import BLADE_SIDES, Camera, Turbine
 from wtcli.geometry.coverage import imaged
 from wtcli.geometry.turbine import SurfaceSamples
-from wtcli.plan.safety import Site
+from wtcli.plan.clearance import Site
 
 Z = np.array([0.0, 0.0, 1.0])
 ALPHAS_DEG = (15.0, 25.0, 35.0, 45.0, 55.0, 65.0, 75.0)

@@ -3,7 +3,7 @@ one call per query.
 
 The planner asks for the clearance of a few points or legs at a time, thousands of times per
 turbine; as numpy code each query paid ~0.1-0.5 ms of array overhead (grid lookup, slab tests,
-sample generation) around the compiled turbine distance. The rules are ``safety``'s module
+sample generation) around the compiled turbine distance. The rules are ``clearance``'s module
 docstring's, unchanged: the same culling boxes, the same leg samples, the same values;
 tests/test_plan.py checks them against every turbine and every sample.
 

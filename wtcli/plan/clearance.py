@@ -1,4 +1,8 @@
-"""Clearance of points and straight legs to every part of every turbine of a site, and the ground.
+"""Where clearance is checked: points and straight legs to every part of every turbine of a
+site, and the ground. The planner (``Site``) and the flight simulator (``clearance_to_parts``)
+both ask here; the distance to one turbine's parts is ``Turbine.clearance`` (compiled in
+``wtcli/geometry/clearance_kernel.py``), the site's culling and legs are compiled in
+``clearance_site_kernel.py``.
 
 The distances are the one turbine model's (``Turbine.clearance``, a lower bound of the true
 distance). A turbine far from a point is skipped: its bounding box, which encloses every part,
@@ -23,6 +27,9 @@ import numpy as np
 
 from wtcli.geometry import Turbine
 
+# How far beyond a turbine's enclosing box its parts are still evaluated (uncapped queries):
+# farther, the reported clearance is this distance, a lower bound. The one cull distance of
+# plan and fly.
 HORIZON_M = 60.0
 MAX_CELLS = 256  # per axis: a site tens of km across still gets a small grid
 GROUND_BRUTE_FORCE = 16  # up to this many ground points, the nearest is found by comparing all
@@ -122,7 +129,7 @@ class Site:
         return min(self.horizon, cap / self._taper_min + 0.01)
 
     def _kernel_grid(self) -> tuple:
-        """The site as ``safety_kernel`` reads it: the boxes and their grid
+        """The site as ``clearance_site_kernel`` reads it: the boxes and their grid
         (``_kernel_boxes``), then each turbine's ``Turbine._kernel_params`` stacked (blade frames
         padded to the most blades, ``nb`` telling how many are real); built on the first query."""
         if self._grid_args is None:
@@ -144,10 +151,10 @@ class Site:
 
     def near(self, points: np.ndarray) -> list[np.ndarray]:
         """Per turbine, the indices of the points inside its grown bounding box."""
-        from wtcli.plan import safety_kernel
+        from wtcli.plan import clearance_site_kernel
 
         P = np.ascontiguousarray(np.atleast_2d(np.asarray(points, float)))
-        pp, tt = safety_kernel.near(P, *self._kernel_boxes())
+        pp, tt = clearance_site_kernel.near(P, *self._kernel_boxes())
         order = np.argsort(tt, kind="stable")
         pp, tt = pp[order], tt[order]
         return [pp[tt == i] for i in range(len(self.turbines))]
@@ -162,16 +169,16 @@ class Site:
         capped at the horizon, or with ``cap`` at the cull distance (module docstring); NaN for
         a point with a NaN coordinate (never "clear").
 
-        Speed: the query runs compiled (``safety_kernel``), and a part's exact distance is
+        Speed: the query runs compiled (``clearance_site_kernel``), and a part's exact distance is
         computed only for points whose cheap bound (distance to a capsule or cylinder enclosing
         the part) is below ``cap`` (default: the horizon); elsewhere the cheap bound, itself a
         lower bound of the true distance, stands in."""
-        from wtcli.plan import safety_kernel  # numba is imported on first use (Turbine.clearance)
+        from wtcli.plan import clearance_site_kernel  # numba is imported on first use (Turbine.clearance)
 
         P = np.ascontiguousarray(np.atleast_2d(np.asarray(points, float)))
         cap = self.horizon if cap is None else min(float(cap), self.horizon)
         grow = self.cull_distance(cap)
-        return safety_kernel.clearance(P, grow, grow == self.horizon, cap, *self._kernel_grid())
+        return clearance_site_kernel.clearance(P, grow, grow == self.horizon, cap, *self._kernel_grid())
 
     def nearest_part(self, point: np.ndarray) -> tuple[str, float]:
         """("T1 blade2", 2.3): the part of any turbine nearest a point, and its distance.
@@ -202,7 +209,7 @@ class Site:
         The same samples and bound as ``segment_lower_bound`` (at most ``step`` apart, minus half
         their spacing), but only the samples inside some turbine's grown box are evaluated: the
         others are at the cull distance, which every evaluated value is capped at anyway."""
-        from wtcli.plan import safety_kernel
+        from wtcli.plan import clearance_site_kernel
 
         p0 = np.ascontiguousarray(np.atleast_2d(np.asarray(p0, float)))
         p1 = np.ascontiguousarray(np.atleast_2d(np.asarray(p1, float)))
@@ -212,7 +219,7 @@ class Site:
         grow = self.cull_distance(cap)
         length = np.linalg.norm(p1 - p0, axis=1)
         n = np.maximum(1, np.ceil(length / step).astype(np.int64))
-        out = safety_kernel.segment_clearance(p0, p1, n, *self._slabs(grow), grow,
+        out = clearance_site_kernel.segment_clearance(p0, p1, n, *self._slabs(grow), grow,
                                               grow == self.horizon, cap, *self._kernel_grid())
         return out - 0.5 * length / n
 
@@ -240,12 +247,12 @@ class Site:
                      cap: float | None) -> tuple[np.ndarray, np.ndarray]:
         """(t, clearance) of the samples of ``segment_clearance`` on one leg that lie near a
         turbine (the others are at the cull distance)."""
-        from wtcli.plan import safety_kernel
+        from wtcli.plan import clearance_site_kernel
 
         p0, p1 = np.asarray(p0, float).reshape(3), np.asarray(p1, float).reshape(3)
         cap = self.horizon if cap is None else min(float(cap), self.horizon)
         n = max(1, math.ceil(float(np.linalg.norm((p1 - p0)[None], axis=1)[0]) / step))
-        j0, j1 = safety_kernel.stretches(*p0, *p1, n, *self._slabs(self.cull_distance(cap)))
+        j0, j1 = clearance_site_kernel.stretches(*p0, *p1, n, *self._slabs(self.cull_distance(cap)))
         if len(j0) == 0:
             return np.zeros(0), np.zeros(0)
         t = np.concatenate([np.arange(a, b + 1) for a, b in zip(j0, j1)]) / n
@@ -253,7 +260,7 @@ class Site:
 
     def _slabs(self, grow: float) -> tuple[np.ndarray, np.ndarray]:
         """The boxes a leg is sampled in: with the horizon each turbine's box, with a cap both
-        part boxes of every turbine; grown by ``grow`` and 1 cm more (``safety_kernel.stretches``)."""
+        part boxes of every turbine; grown by ``grow`` and 1 cm more (``clearance_site_kernel.stretches``)."""
         if grow == self.horizon:
             return self.box_lo - (grow + 0.01), self.box_hi + (grow + 0.01)
         return (np.ascontiguousarray(self.part_lo.reshape(-1, 3) - (grow + 0.01)),
@@ -332,15 +339,15 @@ class Site:
         first of equally near ones. The points with one index form a convex region.
 
         The ground points in the 3 x 3 cells around each point's cell are compared (compiled,
-        ``safety_kernel.ground_index``): where the nearest of them is within one cell size, no
+        ``clearance_site_kernel.ground_index``): where the nearest of them is within one cell size, no
         point further out can be nearer (nor as near); elsewhere, and on small sites, all are."""
-        from wtcli.plan import safety_kernel
+        from wtcli.plan import clearance_site_kernel
 
         P = np.ascontiguousarray(np.atleast_2d(np.asarray(points, float)))
         G = self.ground_points
         if len(G) == 0:
             return np.argmin(np.zeros((len(P), 0)), axis=1)  # numpy's own error
-        return safety_kernel.ground_index(P, G, np.asarray(self._g_origin, float), float(self._g_cell),
+        return clearance_site_kernel.ground_index(P, G, np.asarray(self._g_origin, float), float(self._g_cell),
                                           np.asarray(self._g_shape, np.int64), self._g_start,
                                           self._g_members, len(G) <= GROUND_BRUTE_FORCE)
 
@@ -362,3 +369,33 @@ class Site:
         order = np.argsort(key, kind="stable")
         self._g_members = order.astype(np.int64)
         self._g_start = np.searchsorted(key[order], np.arange(int(self._g_shape.prod()) + 1))
+
+
+def clearance_to_parts(turbines: list[Turbine] | tuple[Turbine, ...] | Site,
+                       points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per point: the clearance (m) to the nearest part of any turbine and that part's name.
+
+    The public call for code outside the planner (the flight simulator): ``turbines`` is a
+    list of ``Turbine`` (or a ``Site`` already built for them), ``points`` (M, 3) ENU metres.
+    Returns ``(distance, part)``: ``distance`` (M,) float, ``Turbine.clearance_by_part``'s
+    values (never more than the true distance; 0 inside a part); ``part`` (M,) object array of
+    names such as ``"T1/blade2"``. Distances are capped at ``HORIZON_M`` (as ``Site.clearance``;
+    there a lower bound); a point farther than that beyond every turbine's enclosing box gets
+    the part ``""``.
+    """
+    site = turbines if isinstance(turbines, Site) else Site(turbines)
+    P = np.ascontiguousarray(np.atleast_2d(np.asarray(points, float)))
+    best = np.full(len(P), np.inf)
+    which = np.full(len(P), "", dtype=object)
+    for i, idx in enumerate(site.near(P)):
+        if not len(idx):
+            continue
+        t = site.turbines[i]
+        by_part = t.clearance_by_part(P[idx])
+        k = by_part.argmin(axis=1)
+        d = by_part[np.arange(len(idx)), k]
+        names = np.array([f"{t.id}/{p}" for p in t.part_names()], dtype=object)
+        better = d < best[idx]
+        best[idx[better]] = d[better]
+        which[idx[better]] = names[k[better]]
+    return np.minimum(best, site.horizon), which
