@@ -39,6 +39,7 @@ from wtcli.plan_file import Plan, Route
 
 PATTERNS = ("adaptive", "fixed-y")
 GSD_FILL = 0.9  # nominal standoff = this fraction of the distance that gives the target GSD
+MAX_LEG_ROUNDS = 8  # dry runs of the routes at most (each connects the legs the last one named)
 SPLIT_BELOW = 0.985  # a single-pass flat side below this predicted coverage is flown split
 Z = np.array([0.0, 0.0, 1.0])
 
@@ -233,8 +234,12 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
     """``links``: {(p bytes, q bytes): via points or None} for legs already ``connect``-ed (in
     the workers); any other leg is connected here. ``times``: ``chunk_time`` of each chunk, if
     known. With ``missing``, a dry run: the legs not in ``links`` are appended to it (as (p, q))
-    instead of connected, and no route is returned. The battery decisions do not depend on the
-    via points, so the dry run asks for exactly the legs the real one flies."""
+    instead of connected, and no route is returned.
+
+    The battery decisions time each transit and return leg along its via points where the leg
+    is in ``links`` (straight where not yet connected): a detour round a turbine is flown, so
+    it is paid from the battery. ``plan_mission`` repeats the dry run until it asks for no new
+    leg, so the real run decides on the legs it flies, and checks every sortie afterwards."""
     fl, s = mission.fleet, mission.settings
     v_slow = min(fl.inspection_speed_m_s, fl.max_speed_m_s)
     v_fast = min(fl.cruise_speed_m_s, fl.max_speed_m_s)
@@ -260,6 +265,14 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
                             f"{s.min_altitude_m:g} m above the ground")
         return [WP(v, None, False, comp, not fast) for v in vias]
 
+    def leg_s(p: np.ndarray, q: np.ndarray) -> float:
+        """Cruise time of a transit leg, along its via points once connected."""
+        vias = links.get((p.tobytes(), q.tobytes())) if links is not None else None
+        if not vias:
+            return _leg_time(p, q, v_fast, climb)
+        P = np.vstack([p[None], np.asarray(vias, float).reshape(-1, 3), q[None]])
+        return float(_leg_times(P, v_fast, climb).sum())
+
     def takeoff() -> None:
         wps.append(WP(above.copy(), None, False, "launch", False))
 
@@ -272,10 +285,10 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
     sortie = _leg_time(launch, above, v_fast, climb)
     for i, ch in enumerate(chunks):
         t_ch = times[i] if times is not None else chunk_time(ch, v_slow, climb)
-        t_to = _leg_time(wps[-1].pos, ch.start, v_fast, climb)
-        t_back = _leg_time(ch.end, above, v_fast, climb) + s.takeoff_altitude_m / climb
+        t_to = leg_s(wps[-1].pos, ch.start)
+        t_back = leg_s(ch.end, above) + s.takeoff_altitude_m / climb
         if sortie + t_to + t_ch + t_back > usable:
-            fresh = _leg_time(launch, above, v_fast, climb) + _leg_time(above, ch.start, v_fast, climb)
+            fresh = _leg_time(launch, above, v_fast, climb) + leg_s(above, ch.start)
             if fresh + t_ch + t_back > usable:
                 raise PlanError(
                     f"{ch.turbine} {ch.name} takes {(fresh + t_ch + t_back) / 60:.1f} min from "
@@ -288,7 +301,7 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
                 swaps.append(len(wps) - 1)
                 takeoff()
                 sortie = _leg_time(launch, above, v_fast, climb)
-            t_to = _leg_time(wps[-1].pos, ch.start, v_fast, climb)
+            t_to = leg_s(wps[-1].pos, ch.start)
         prev = wps[-1].pos
         wps.extend(link(prev, ch.start, "transit", True, f"to {ch.turbine} {ch.name}"))
         wps.append(WP(ch.wps[0].pos, ch.wps[0].fwd, ch.wps[0].photo, ch.wps[0].component, False))
@@ -323,9 +336,14 @@ def _timed_route(uav: str, wps: list[WP], swaps: list[int], v_slow: float, v_fas
     # Photo stations are chosen within the gimbal's range; an aim carried over between them
     # (transits) or the overview's is held at the limit, as the gimbal would.
     pitch = np.clip(np.degrees(np.arcsin(np.clip(F[:, 2], -1.0, 1.0))), *pitch_range)
+    # Each sortie: from leaving the launch point to landing there (the swap's ground time not
+    # included): what the usable battery (battery_minutes - reserve) must cover.
+    starts, ends = [0] + list(swaps), [i - 1 for i in swaps] + [n - 1]
+    sorties = [float(t[b] - t[a]) for a, b in zip(starts, ends)]
     return Route(uav, t, pos, speed, yaw, pitch, np.array([w.photo for w in wps]),
                  np.array([w.component for w in wps], dtype=object),
-                 summary={"battery_swaps": len(swaps), "sorties": len(swaps) + 1})
+                 summary={"battery_swaps": len(swaps), "sorties": len(swaps) + 1,
+                          "longest_sortie_s": max(sorties)})
 
 
 # ---- checks ---------------------------------------------------------------------------------------------
@@ -562,13 +580,25 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
                      pp, links, [x for tid in order[a:b] for x in times[tid]]))
     # The legs between turbines and to and from the launch point, connected in the workers too:
     # a dry run of each route names them, then the routes are built from them (in parallel).
-    missing: list = []
-    for job in jobs:
-        build_route(*job, missing=missing)
-    legs = {(p.tobytes(), q.tobytes()): (site_plan, p, q, pp.leg_required, s.min_altitude_m)
-            for p, q in missing}
-    links.update(_map(_link, list(legs.values()), workers, stage_ticker(progress, "legs", len(legs))))
+    # A connected leg's detour can move a battery swap, which asks for other legs: repeated
+    # until the dry runs ask for nothing new (the battery decisions then rest on flown legs).
+    for rounds in range(MAX_LEG_ROUNDS):
+        missing: list = []
+        for job in jobs:
+            build_route(*job, missing=missing)
+        legs = {(p.tobytes(), q.tobytes()): (site_plan, p, q, pp.leg_required, s.min_altitude_m)
+                for p, q in missing}
+        tick = stage_ticker(progress, "legs", len(legs)) if rounds == 0 else (lambda: None)
+        if not legs:
+            break
+        links.update(_map(_link, list(legs.values()), workers, tick))
     routes = _map(_route, jobs, workers, stage_ticker(progress, "routes", len(jobs)))
+    over = [(r.uav, r.summary["longest_sortie_s"]) for r in routes
+            if r.summary["longest_sortie_s"] > fl.usable_battery_s + 1e-6]
+    if over:
+        raise PlanError(f"{over[0][0]}: a sortie takes {over[0][1] / 60:.2f} min, more than "
+                        f"battery_minutes - battery_reserve_minutes = "
+                        f"{fl.usable_battery_s / 60:.2f} min: the reserve would be flown")
 
     check = check_routes(routes, site_real, launch, s.safe_distance_m, s.min_altitude_m)
     if enforce_safety and (check["waypoint_violations"] or check["leg_violations"]
