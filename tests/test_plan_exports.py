@@ -299,3 +299,245 @@ def test_a_site_wider_than_the_limit_is_refused_naming_the_key(tmp_path):
     with pytest.raises(ConfigError, match="UAV1 route point 2"):
         export_all(plan, tmp_path)
     assert not list(tmp_path.iterdir())
+
+
+# ---- DJI WPML (.kmz) ------------------------------------------------------------------------------
+KML = "{http://www.opengis.net/kml/2.2}"
+WPML = "{http://www.dji.com/wpmz/1.0.2}"
+ACTION_PARAMS = {
+    "gimbalRotate": ["gimbalHeadingYawBase", "gimbalRotateMode", "gimbalPitchRotateEnable",
+                     "gimbalPitchRotateAngle", "gimbalRollRotateEnable", "gimbalRollRotateAngle",
+                     "gimbalYawRotateEnable", "gimbalYawRotateAngle", "gimbalRotateTimeEnable",
+                     "gimbalRotateTime", "payloadPositionIndex"],
+    "rotateYaw": ["aircraftHeading", "aircraftPathMode"],
+    "takePhoto": ["payloadPositionIndex", "fileSuffix", "useGlobalPayloadLensIndex"],
+}
+
+
+def _children(e, ns=WPML) -> list[str]:
+    return [c.tag.replace(ns, "") for c in e]
+
+
+def _text(e, tag: str, ns=WPML) -> str:
+    c = e.find(ns + tag)
+    assert c is not None and c.text is not None and c.text.strip(), f"missing {tag}"
+    return c.text.strip()
+
+
+def parse_wpml(text: str, template: bool) -> dict:
+    """Strict reader of DJI WPML 1.0.2 (waylines.wpml, or template.kml with ``template``): every
+    element the DJI reference marks required for these drones, in range, and nothing unknown."""
+    import xml.etree.ElementTree as ET
+
+    assert text.startswith('<?xml version="1.0" encoding="UTF-8"?>\n')
+    root = ET.fromstring(text)
+    assert root.tag == KML + "kml" and _children(root, KML) == ["Document"]
+    doc = root.find(KML + "Document")
+    mc = doc.find(WPML + "missionConfig")
+    assert _children(mc) == ["flyToWaylineMode", "finishAction", "exitOnRCLost",
+                             "executeRCLostAction", "takeOffSecurityHeight",
+                             "globalTransitionalSpeed", "globalRTHHeight", "droneInfo", "payloadInfo"]
+    assert _text(mc, "flyToWaylineMode") in ("safely", "pointToPoint")
+    assert _text(mc, "finishAction") == "goHome"
+    assert _text(mc, "exitOnRCLost") in ("goContinue", "executeLostAction")
+    assert _text(mc, "executeRCLostAction") in ("goBack", "landing", "hover")
+    assert 2 <= float(_text(mc, "takeOffSecurityHeight")) <= 1500
+    assert 0 < float(_text(mc, "globalTransitionalSpeed")) <= 15
+    di, pi = mc.find(WPML + "droneInfo"), mc.find(WPML + "payloadInfo")
+    drone = (int(_text(di, "droneEnumValue")), int(_text(di, "droneSubEnumValue")))
+    payload = int(_text(pi, "payloadEnumValue"))
+    assert drone in ((60, 0), (89, 0), (67, 0), (67, 1)) and payload in (42, 43, 50, 52, 53)
+    assert int(_text(pi, "payloadPositionIndex")) == 0
+    folders = doc.findall(KML + "Folder")
+    assert len(folders) == 1
+    f = folders[0]
+    if template:
+        assert _text(doc, "author") == "wtinspect"
+        assert _text(f, "templateType") == "waypoint" and _text(f, "templateId") == "0"
+        cs = f.find(WPML + "waylineCoordinateSysParam")
+        assert _text(cs, "coordinateMode") == "WGS84"
+        assert _text(cs, "heightMode") == "relativeToStartPoint"
+        assert _text(f, "gimbalPitchMode") == "usePointSetting"
+    else:
+        assert _text(f, "templateId") == "0" and _text(f, "waylineId") == "0"
+        assert _text(f, "executeHeightMode") == "relativeToStartPoint"
+    assert 0 < float(_text(f, "autoFlightSpeed")) <= 15
+    wps, groups = [], set()
+    for k, pm in enumerate(f.findall(KML + "Placemark")):
+        lon, lat = (float(x) for x in _text(pm.find(KML + "Point"), "coordinates", KML).split(","))
+        assert -90 <= lat <= 90 and -180 <= lon <= 180
+        assert int(_text(pm, "index")) == k, "indices run 0, 1, 2, ... with no gap"
+        if template:
+            h = float(_text(pm, "height"))
+            assert float(_text(pm, "ellipsoidHeight")) == h
+            for key in ("useGlobalHeight", "useGlobalSpeed", "useGlobalHeadingParam",
+                        "useGlobalTurnParam"):
+                assert _text(pm, key) == "0"
+            gimbal = float(_text(pm, "gimbalPitchAngle"))
+        else:
+            h, gimbal = float(_text(pm, "executeHeight")), None
+        v = float(_text(pm, "waypointSpeed"))
+        assert 0 < v <= 15
+        hp = pm.find(WPML + "waypointHeadingParam")
+        assert _text(hp, "waypointHeadingMode") == "smoothTransition"
+        heading = float(int(_text(hp, "waypointHeadingAngle")))  # an integer in WPML
+        assert -180 <= heading <= 180
+        assert _text(hp, "waypointHeadingPathMode") == "followBadArc"
+        tp = pm.find(WPML + "waypointTurnParam")
+        assert _text(tp, "waypointTurnMode") == "toPointAndStopWithDiscontinuityCurvature"
+        actions = []
+        for g in pm.findall(WPML + "actionGroup"):
+            gid = int(_text(g, "actionGroupId"))
+            assert gid == len(groups), "action group ids run 0, 1, 2, ..."
+            groups.add(gid)
+            assert int(_text(g, "actionGroupStartIndex")) == int(_text(g, "actionGroupEndIndex")) == k
+            assert _text(g, "actionGroupMode") == "sequence"
+            assert _text(g.find(WPML + "actionTrigger"), "actionTriggerType") == "reachPoint"
+            for a, act in enumerate(g.findall(WPML + "action")):
+                assert int(_text(act, "actionId")) == a
+                func = _text(act, "actionActuatorFunc")
+                p = act.find(WPML + "actionActuatorFuncParam")
+                assert _children(p) == ACTION_PARAMS[func], func
+                actions.append((func, {c: _text(p, c) for c in ACTION_PARAMS[func]}))
+        for func, p in actions:
+            if func == "rotateYaw":
+                heading = float(p["aircraftHeading"])
+                assert -180 <= heading <= 180
+                assert p["aircraftPathMode"] in ("clockwise", "counterClockwise")
+            if func == "gimbalRotate":
+                assert p["gimbalRotateMode"] == "absoluteAngle" and p["gimbalPitchRotateEnable"] == "1"
+        wps.append({"lat": lat, "lon": lon, "height": h, "speed": v, "heading": heading,
+                    "gimbal": gimbal, "actions": [a for a, _ in actions],
+                    "params": dict((a, p) for a, p in actions)})
+    assert wps, "a wayline has at least one waypoint"
+    return {"drone": drone, "payload": payload, "waypoints": wps}
+
+
+def _dji_plan() -> Plan:
+    """small_plan with headings that are not whole degrees and a gimbal that moves mid-sortie."""
+    plan = small_plan()
+    r = plan.routes[0]
+    r.yaw_deg[:] = [0, 10.0, 212.34, 212.34, 10.0, 0, 0, 5.0, 97.25, 350.0, 0]
+    r.gimbal_pitch_deg[:] = [0, 0, -10, -12.5, 0, 0, 0, 0, -3.3, 0, 0]
+    return plan
+
+
+def _read_kmz(path) -> tuple[str, str]:
+    import zipfile
+
+    with zipfile.ZipFile(path) as z:
+        assert sorted(z.namelist()) == ["wpmz/template.kml", "wpmz/waylines.wpml"]
+        return (z.read("wpmz/template.kml").decode("utf-8"),
+                z.read("wpmz/waylines.wpml").decode("utf-8"))
+
+
+def _wrap(deg):
+    return (np.asarray(deg, float) + 180) % 360 - 180
+
+
+def test_dji_kmz_parses_back_to_the_plan_and_matches_golden(tmp_path):
+    plan = _dji_plan()
+    r = plan.routes[0]
+    files = export_all(plan, tmp_path, stem="small", dji="m350-p1")
+    kmz = sorted(f for f in files if f.suffix == ".kmz")
+    assert [f.name for f in kmz] == ["small_UAV1_s1.kmz", "small_UAV1_s2.kmz"]
+    assert kmz[0].read_bytes() == export_all(plan, tmp_path / "again", stem="small",
+                                             dji="m350-p1")[0].read_bytes(), "same plan, same bytes"
+    truth = _textbook_enu_to_llh(r.pos, ORIGIN)
+    for s, ((a, b), path) in enumerate(zip(sorties(r), kmz), start=1):
+        template, waylines = _read_kmz(path)
+        _golden(f"small_s{s}.template.kml", template)
+        _golden(f"small_s{s}.waylines.wpml", waylines)
+        t, w = parse_wpml(template, template=True), parse_wpml(waylines, template=False)
+        assert t["drone"] == w["drone"] == (89, 0) and t["payload"] == w["payload"] == 50
+        idx = list(range(a + 1, b))  # airborne points; take-off and landing are the drone's
+        assert len(w["waypoints"]) == len(t["waypoints"]) == len(idx)
+        for i, wp, tp in zip(idx, w["waypoints"], t["waypoints"]):
+            got = np.array([[wp["lat"], wp["lon"], wp["height"] + truth[a, 2]]])
+            assert _metres_apart(got, truth[i:i + 1]).max() < 0.01  # 1 cm
+            assert (tp["lat"], tp["lon"], tp["height"]) == (wp["lat"], wp["lon"], wp["height"])
+            assert abs(_wrap(wp["heading"] - r.yaw_deg[i])) < 0.1
+            assert wp["speed"] == pytest.approx(r.speed[i + 1], abs=0.01)
+            assert tp["gimbal"] == pytest.approx(r.gimbal_pitch_deg[i], abs=0.1)
+            assert ("takePhoto" in wp["actions"]) == bool(r.photo[i])
+            if r.photo[i]:
+                assert wp["actions"][-1] == "takePhoto", "the photo is taken after turning"
+                assert wp["params"]["takePhoto"]["fileSuffix"] == r.component[i].replace("/", "_")
+        # the gimbal the aircraft holds at each waypoint, from gimbalRotate actions alone
+        held = None
+        for i, wp in zip(idx, w["waypoints"]):
+            if "gimbalRotate" in wp["actions"]:
+                held = float(wp["params"]["gimbalRotate"]["gimbalPitchRotateAngle"])
+            assert held == pytest.approx(r.gimbal_pitch_deg[i], abs=0.1)
+        assert sum("gimbalRotate" in wp["actions"] for wp in w["waypoints"]) == \
+            1 + int(np.sum(np.diff(r.gimbal_pitch_deg[a + 1:b]) != 0))
+
+
+def test_dji_kmz_for_every_aircraft_and_the_sample_site(tmp_path):
+    from wtcli.plan.config import load_mission
+    from wtcli.plan.dji_kmz import AIRCRAFT
+    from wtcli.plan.mission import plan_mission
+
+    plan = _dji_plan()
+    for key, ac in AIRCRAFT.items():
+        (path,) = [f for f in export_all(plan, tmp_path / key, dji=key) if f.suffix == ".kmz"][:1]
+        w = parse_wpml(_read_kmz(path)[1], template=False)
+        assert w["drone"] == (ac.drone_enum, ac.drone_sub_enum) and w["payload"] == ac.payload_enum
+    root = Path(__file__).resolve().parents[1]
+    mission = load_mission(root / "sample_images" / "turbines.yaml")
+    real = plan_mission(mission)
+    files = export_all(real, tmp_path / "real", stem="m", dji="m30t",
+                       cruise=mission.fleet.cruise_speed_m_s, hover=mission.fleet.inspection_speed_m_s)
+    photos = 0
+    for f in files:
+        if f.suffix == ".kmz":
+            for text, template in zip(_read_kmz(f), (True, False)):
+                wps = parse_wpml(text, template)["waypoints"]
+            photos += sum("takePhoto" in wp["actions"] for wp in wps)
+    assert photos == real.summary["photos"]
+
+
+def test_dji_kmz_refuses_what_dji_waylines_cannot_fly(tmp_path):
+    plan = _dji_plan()
+    with pytest.raises(ConfigError, match="--dji-kmz: expected one of m300-p1"):
+        export_all(plan, tmp_path, dji="phantom")
+    plan.routes[0].speed[3] = 17.0
+    with pytest.raises(ConfigError, match=r"UAV1 leg 2->3 is planned at 17 m/s.*\(0, 15\]"):
+        export_all(plan, tmp_path, dji="m300-h20")
+    assert not list(tmp_path.iterdir()), "nothing written when the DJI export is refused"
+
+
+# ---- read back by the code ground stations use ----------------------------------------------------
+def test_pymavlink_reads_every_waypoints_file_we_write(tmp_path):
+    """pymavlink's mission loader (MAVProxy, many ground-station scripts) reads each .waypoints
+    to the same commands, frames, parameters and positions as the plan's mission items."""
+    mavwp = pytest.importorskip("pymavlink.mavwp", reason="pymavlink (test-only, requirements.lock) "
+                                "is not installed in this environment")
+    from wtcli.plan.config import load_mission
+    from wtcli.plan.mission import plan_mission
+
+    root = Path(__file__).resolve().parents[1]
+    plans = {"small": small_plan(), "wide": wide_plan(),
+             "sample": plan_mission(load_mission(root / "sample_images" / "turbines.yaml"))}
+    n_files = 0
+    for name, plan in plans.items():
+        for r in plan.routes:
+            for s, (a, b) in enumerate(sorties(r), start=1):
+                items, home = mission_items(plan, r, a, b)
+                path = tmp_path / f"{name}_{r.uav}_s{s}.waypoints"
+                path.write_text(wpl_text(items, home))
+                loader = mavwp.MAVWPLoader()
+                assert loader.load(str(path)) == len(items) + 1
+                h = loader.wp(0)
+                assert (h.seq, h.frame, h.command, h.current) == (0, 0, 16, 1)
+                assert (h.x, h.y, h.z) == pytest.approx(tuple(home), abs=1e-3)
+                for k, it in enumerate(items, start=1):
+                    m = loader.wp(k)
+                    assert (m.seq, m.frame, m.command, m.autocontinue) == (k, it.frame, it.command, 1)
+                    want = [0.0 if p is None else p for p in it.params]
+                    got = [m.param1, m.param2, m.param3, m.param4, m.x, m.y, m.z]
+                    assert got[:4] == pytest.approx(want[:4], abs=1e-3)  # 6 significant digits
+                    assert got[4:6] == pytest.approx(want[4:6], abs=1e-7)  # ~1 cm
+                    assert got[6] == pytest.approx(want[6], abs=1e-3)
+                n_files += 1
+    assert n_files >= 4

@@ -48,6 +48,10 @@ def register(app: typer.Typer) -> None:
         export_dir: Optional[Path] = typer.Option(
             None, "--export-dir", help="Write QGroundControl .plan and QGC WPL 110 .waypoints per "
                                        "UAV sortie, and a .geojson (needs site.origin)."),
+        dji_kmz: Optional[str] = typer.Option(
+            None, "--dji-kmz", metavar="AIRCRAFT",
+            help="With --export-dir, also write a DJI WPML .kmz per sortie for DJI Pilot 2: "
+                 "m300-p1, m300-h20, m350-p1, m350-h20, m30 or m30t."),
         picture: Optional[Path] = typer.Option(None, "--picture",
                                                help="Write front/side/top views of the path (PNG)."),
         pattern: str = typer.Option("adaptive", "--pattern",
@@ -75,6 +79,12 @@ def register(app: typer.Typer) -> None:
 
         if pattern not in PATTERNS:
             raise ConfigError(f"--pattern: expected one of {', '.join(PATTERNS)}, got {pattern!r}")
+        if dji_kmz is not None:  # checked before planning, not after
+            from wtcli.plan.dji_kmz import aircraft
+
+            aircraft(dji_kmz)
+            if export_dir is None:
+                raise ConfigError("--dji-kmz needs --export-dir (where to write the .kmz files)")
         mission = load_mission(turbines_yaml)
         azimuths, sources = blade_azimuths(mission, list(inputs or []), _pose(camera_pose))
         for tid, src in sources.items():
@@ -89,7 +99,8 @@ def register(app: typer.Typer) -> None:
         if export_dir is not None:
             fl = mission.fleet
             files = export_all(result, export_dir, stem=(out.stem if out else "mission"),
-                               cruise=fl.cruise_speed_m_s, hover=fl.inspection_speed_m_s)
+                               cruise=fl.cruise_speed_m_s, hover=fl.inspection_speed_m_s,
+                               dji=dji_kmz)
             err_console.print(f"exports: {len(files)} file(s) -> {export_dir}")
         if picture is not None:
             ok, png = cv2.imencode(".png", draw_plan(result))

@@ -1,14 +1,14 @@
-"""Mission exports of a Plan: QGroundControl ``.plan``, MAVLink ``QGC WPL 110`` and GeoJSON.
+"""Mission exports of a Plan: QGroundControl ``.plan``, MAVLink ``QGC WPL 110``, GeoJSON, and
+DJI WPML ``.kmz`` on request (``wtcli.plan.dji_kmz``). docs/plan.md "Mission exports".
 
-Field-level notes: /work/shared/formats.md (mirrored in docs/plan.md). One file per UAV and
-sortie (a battery swap ends a sortie: a mission file is flown on one battery). Every position is
-the exact WGS84 conversion of the plan's ENU point (``wtcli.plan.geodesy``). Waypoints are in
+One file per UAV and sortie (a battery swap ends a sortie: a mission file is flown on one
+battery). Every position is the exact WGS84 conversion of the plan's ENU point (``wtcli.plan.geodesy``). Waypoints are in
 frame 3: altitude relative to the launch point (home) = the point's height minus home's, both
 exact (not the ENU z difference, which is d^2/2R lower at d from the origin). Home is the launch
 point in frame 0, AMSL (site.origin.alt plus the ellipsoid-height difference). Commands used:
 
 * 22 NAV_TAKEOFF to the take-off altitude, 16 NAV_WAYPOINT (p2 acceptance radius, p4 yaw = the
-  camera heading, so the vehicle turns to face what the camera looks at), 21 NAV_LAND at home;
+  camera heading: PX4 turns to it, ArduPilot Copter ignores it), 21 NAV_LAND at home;
 * 178 DO_CHANGE_SPEED (p1 = 1 ground speed, p2 m/s) whenever the planned speed changes;
 * 205 DO_MOUNT_CONTROL (p1 gimbal pitch, p7 = 2 MAVLink targeting) whenever the gimbal pitch
   changes, placed before the waypoint it is for;
@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from wtcli.errors import ConfigError
-from wtcli.jsonio import atomic_write_text
+from wtcli.jsonio import atomic_write_bytes, atomic_write_text
 from wtcli.plan.geodesy import MAX_SITE_RADIUS_M, check_site_extent, enu_to_geodetic
 from wtcli.plan_file import Plan, Route
 
@@ -169,12 +169,22 @@ def geojson_dict(plan: Plan) -> dict:
 
 
 def export_all(plan: Plan, out_dir: str | Path, stem: str = "mission", cruise: float = 8.0,
-               hover: float = 2.0) -> list[Path]:
-    """Write ``STEM_UAV_sN.plan`` and ``.waypoints`` per UAV sortie and ``STEM.geojson``."""
+               hover: float = 2.0, dji: str | None = None) -> list[Path]:
+    """Write ``STEM_UAV_sN.plan`` and ``.waypoints`` per UAV sortie and ``STEM.geojson``; with
+    ``dji`` (a key of ``wtcli.plan.dji_kmz.AIRCRAFT``) also a DJI WPML ``STEM_UAV_sN.kmz``."""
+    from wtcli.plan import dji_kmz
+
     _require_origin(plan)
     check_plan_extent(plan)
+    ac = dji_kmz.aircraft(dji) if dji is not None else None
     out_dir = Path(out_dir)
-    written = []
+    kmz = []  # built before anything is written: a refused DJI export leaves no partial set
+    if ac is not None:
+        for r in plan.routes:
+            for s, (a, b) in enumerate(sorties(r), start=1):
+                kmz.append((out_dir / f"{stem}_{r.uav}_s{s}.kmz", dji_kmz.kmz_bytes(
+                    dji_kmz.sortie_waypoints(plan, r, a, b), ac, cruise, hover)))
+    written = [atomic_write_bytes(path, data) for path, data in kmz]
     for r in plan.routes:
         for s, (a, b) in enumerate(sorties(r), start=1):
             items, home = mission_items(plan, r, a, b)
