@@ -3,6 +3,8 @@
     python benchmarks/report.py            # write docs/benchmarks.md
     python benchmarks/report.py --check    # exit 1 if docs/benchmarks.md differs from what it renders
 
+It also renders the block of figures that ``BLOCKS`` names in other pages (the model card).
+
 Every headline figure of the project is listed in ``SECTIONS`` below: which results file holds it
 (written by the benchmark through ``benchmarks/_results.py``, with the command, date and machine
 that made it), under which key, and how it is shown. A benchmark whose results file does not
@@ -27,6 +29,13 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 DOC = ROOT / "docs" / "benchmarks.md"
 WIDTH = 100
+# Other pages that show some sections' figures, between these two lines (rendered as one table).
+BLOCKS: dict[str, tuple[str, ...]] = {
+    "models/README.md": ("Segmentation: held-out renders", "Segmentation: real photos",
+                         "Segmentation: speed"),
+}
+BEGIN = "<!-- figures: rendered by `python benchmarks/report.py` from benchmarks/results; edit there -->"
+END = "<!-- end of rendered figures -->"
 
 
 class ReportError(Exception):
@@ -98,7 +107,7 @@ SECTIONS: tuple[Section, ...] = (
            "{:.1f}× ({:.2f} images/s)", "≥ 5×"),
          F("the same, edges refined", ("speed.speedup_vs_stock_refined", "speed.ours_refined_images_per_s"),
            "{:.1f}× ({:.2f} images/s)", "≥ 5×"),
-         F("the same, float32 (a CPU without native bfloat16)",
+         F("the network with its mirror pass in float32 (a CPU without native bfloat16)",
            ("speed.speedup_vs_stock_fp32", "speed.ours_fp32_images_per_s"), "{:.1f}× ({:.2f} images/s)"),
          F("without the mirror pass (`--no-flip`)",
            ("speed.speedup_vs_stock_no_flip", "speed.ours_no_flip_images_per_s"), "{:.1f}× ({:.2f} images/s)"),
@@ -215,6 +224,55 @@ def load(name: str, results: Path) -> dict | None:
     return doc
 
 
+def _rows(s: Section, doc: dict, where: str) -> list[tuple[str, str, str]]:
+    rows = []
+    for f in s.figures:
+        values = [lookup(doc, k, where) for k in f.keys]
+        try:
+            shown = f.fmt.format(*values)
+        except (ValueError, TypeError, IndexError) as e:
+            raise ReportError(f"{where}: {f.keys} cannot be shown as {f.fmt!r} ({e})") from None
+        shown = re.sub(r"(\d)%", r"\1 %", shown)  # 96.0 %, as the rest of the docs write it
+        rows.append((f.label, shown, f.goal or "—"))
+    return rows
+
+
+def _provenance(doc: dict, where: str) -> str:
+    m = doc["measured"]
+    machine = m["machine"]["summary"] if isinstance(m["machine"], dict) else str(m["machine"])
+    return (f"Measured {m['date']} by `{m['command']}` on a {machine}"
+            f" (`{where}`, tool {doc.get('tool_version', '?')}).")
+
+
+def render_block(titles: tuple[str, ...], results: Path = RESULTS) -> str:
+    """The figures of some sections as one table, for a page that shows them beside its text."""
+    rel = results.relative_to(ROOT) if results.is_relative_to(ROOT) else results
+    by_title = {s.title: s for s in SECTIONS}
+    lines, table, seen = [], ["| | figure | value | goal |", "| --- | --- | --- | --- |"], set()
+    for title in titles:
+        s = by_title[title]
+        doc = load(s.name, results)
+        where = f"{rel}/{s.name}.json"
+        short = title.split(": ", 1)[-1]
+        if doc is None:
+            lines += textwrap.wrap(f"{short}: not measured yet, run `{s.command}`.", WIDTH)
+            continue
+        if s.name not in seen:
+            seen.add(s.name)
+            lines += textwrap.wrap(_provenance(doc, where), WIDTH, break_on_hyphens=False)
+        table += [f"| {short} | {a} | {b} | {c} |" for a, b, c in _rows(s, doc, where)]
+    return "\n".join([BEGIN, *lines, "", *table, END])
+
+
+def with_blocks(text: str, titles: tuple[str, ...], page: str, results: Path = RESULTS) -> str:
+    """``text`` with its rendered block replaced by a fresh one."""
+    if BEGIN not in text or END not in text:
+        raise ReportError(f"{page}: no rendered-figures block (the lines {BEGIN!r} ... {END!r})")
+    head, rest = text.split(BEGIN, 1)
+    _, tail = rest.split(END, 1)
+    return head + render_block(titles, results) + tail
+
+
 def render(results: Path = RESULTS) -> str:
     rel = results.relative_to(ROOT) if results.is_relative_to(ROOT) else results
     out = ["# Benchmarks", "",
@@ -233,21 +291,10 @@ def render(results: Path = RESULTS) -> str:
             out += [f"| {f.label} | not measured yet | {f.goal or '—'} |" for f in s.figures]
             out.append("")
             continue
-        m = doc["measured"]
-        machine = m["machine"]["summary"] if isinstance(m["machine"], dict) else str(m["machine"])
-        out += [*textwrap.wrap(f"Measured {m['date']} by `{m['command']}` on a {machine}"
-                               f" (`{rel}/{s.name}.json`, tool {doc.get('tool_version', '?')}).",
-                               WIDTH, break_on_hyphens=False), "",
-                "| figure | value | goal |", "| --- | --- | --- |"]
         where = f"{rel}/{s.name}.json"
-        for f in s.figures:
-            values = [lookup(doc, k, where) for k in f.keys]
-            try:
-                shown = f.fmt.format(*values)
-            except (ValueError, TypeError, IndexError) as e:
-                raise ReportError(f"{where}: {f.keys} cannot be shown as {f.fmt!r} ({e})") from None
-            shown = re.sub(r"(\d)%", r"\1 %", shown)  # 96.0 %, as the rest of the docs write it
-            out.append(f"| {f.label} | {shown} | {f.goal or '—'} |")
+        out += [*textwrap.wrap(_provenance(doc, where), WIDTH, break_on_hyphens=False), "",
+                "| figure | value | goal |", "| --- | --- | --- |"]
+        out += [f"| {a} | {b} | {c} |" for a, b, c in _rows(s, doc, where)]
         out.append("")
     return "\n".join(out)
 
@@ -258,24 +305,36 @@ def main(argv: list[str] | None = None) -> int:
                     help="do not write: exit 1 if the page differs from what the results files give")
     ap.add_argument("--results", type=Path, default=RESULTS, help="folder of the results files")
     ap.add_argument("--out", type=Path, default=DOC, help="the page to write or check")
+    ap.add_argument("--no-blocks", dest="blocks", action="store_false",
+                    help="leave the figure blocks of other pages (" + ", ".join(BLOCKS) + ") alone")
     a = ap.parse_args(argv)
     try:
-        text = render(a.results)
-    except ReportError as e:
+        pages = {a.out: render(a.results)}
+        if a.blocks:
+            for page, titles in BLOCKS.items():
+                have = (ROOT / page).read_text(encoding="utf-8")
+                pages[ROOT / page] = with_blocks(have, titles, page, a.results)
+    except (ReportError, OSError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 3
     if a.check:
-        have = a.out.read_text(encoding="utf-8") if a.out.exists() else ""
-        if have != text:
-            diff = difflib.unified_diff(have.splitlines(), text.splitlines(), str(a.out),
-                                        "rendered", lineterm="", n=1)
-            print("\n".join(list(diff)[:40]), file=sys.stderr)
-            print(f"{a.out} differs from {a.results}: run `python benchmarks/report.py`",
+        stale = []
+        for path, text in pages.items():
+            have = path.read_text(encoding="utf-8") if path.exists() else ""
+            if have != text:
+                diff = difflib.unified_diff(have.splitlines(), text.splitlines(), str(path),
+                                            "rendered", lineterm="", n=1)
+                print("\n".join(list(diff)[:40]), file=sys.stderr)
+                stale.append(str(path))
+        if stale:
+            print(f"{', '.join(stale)}: differ from {a.results}: run `python benchmarks/report.py`",
                   file=sys.stderr)
             return 1
         return 0
-    a.out.write_text(text, encoding="utf-8")
-    print(f"wrote {a.out}")
+    for path, text in pages.items():
+        if not path.exists() or path.read_text(encoding="utf-8") != text:
+            path.write_text(text, encoding="utf-8")
+            print(f"wrote {path}")
     return 0
 
 

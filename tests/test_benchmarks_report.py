@@ -71,16 +71,28 @@ def test_a_results_file_without_a_shown_figure_is_an_error(report, results, tmp_
     results.save("plan_property", {"summary": {"planned": 3}}, argv=[], out=tmp_path / "plan_property.json")
     with pytest.raises(report.ReportError, match=r"plan_property.json: no `summary.plan_errors`"):
         report.render(tmp_path)
-    assert report.main(["--check", "--results", str(tmp_path), "--out", str(tmp_path / "x.md")]) == 3
+    assert report.main(["--check", "--no-blocks", "--results", str(tmp_path),
+                        "--out", str(tmp_path / "x.md")]) == 3
     assert "summary.plan_errors" in capsys.readouterr().err
 
 
 def test_check_fails_on_a_stale_page(report, tmp_path):
     page = tmp_path / "benchmarks.md"
     page.write_text(report.render().replace("0.854", "0.860"))
-    assert report.main(["--check", "--out", str(page)]) == 1
-    assert report.main(["--out", str(page)]) == 0
-    assert report.main(["--check", "--out", str(page)]) == 0
+    assert report.main(["--check", "--no-blocks", "--out", str(page)]) == 1
+    assert report.main(["--no-blocks", "--out", str(page)]) == 0
+    assert report.main(["--check", "--no-blocks", "--out", str(page)]) == 0
+
+
+def test_the_model_cards_figures_are_rendered_too(report, tmp_path):
+    card = (ROOT / "models" / "README.md").read_text()
+    block = card[card.index(report.BEGIN):card.index(report.END)]
+    assert "| held-out renders | mask IoU blade / tower / nacelle | 0.854 / 0.914 / 0.834 |" in block
+    assert report.with_blocks(card, report.BLOCKS["models/README.md"], "models/README.md") == card
+    stale = card.replace("| 0.854 / 0.914 / 0.834 |", "| 0.850 / 0.914 / 0.834 |")
+    assert report.with_blocks(stale, report.BLOCKS["models/README.md"], "models/README.md") == card
+    with pytest.raises(report.ReportError, match="no rendered-figures block"):
+        report.with_blocks("# a page\n", ("Segmentation: speed",), "x.md")
 
 
 def test_save_refuses_a_measured_key(results, tmp_path):
