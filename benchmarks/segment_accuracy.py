@@ -133,8 +133,8 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
     from wtcli.synth.render import render_sample
 
     ev = Evaluator(0.5)
-    # The same predictions scored against the half-coverage labels of sessions 1-18 too
-    # (docs/synth.md, label convention), so figures stay comparable across the change.
+    # The same predictions scored against the half-coverage labels too (docs/synth.md, label
+    # convention), so figures compare with models trained on those labels.
     ev_half, zev_half = Evaluator(0.5), Evaluator(0.5)
     zoom = {"ev": Evaluator(0.5), "right": 0, "errs": [], "by_fill": {"distant": [0, 0], "working": [0, 0]}}
     # What `segment` gives by default: the second look's instances, edges refined.

@@ -35,8 +35,8 @@ SUPERSAMPLE = 2
 # Label conventions. "outline" (the default): every pixel a part visibly tints, as people
 # annotate photos -- the part's coverage, blurred as the camera blurred the photo, reaches 5 %.
 # Measured: the real photos' blade masks end on pixels carrying 3 % of the blade's contrast
-# (median of 38 photos); "half" labels (sessions 1-18: a part covering at least half of the
-# pixel, before the blur) ended on 61 %.
+# (median of 38 photos); "half" labels (a part covering at least half of the pixel, before
+# the blur; what models trained before 2026-12-02 learnt) ended on 61 %.
 LABELS = {"outline": 0.05, "half": 0.5}
 _LOGO_COLOURS = ((0.55, 0.25, 0.05), (0.2, 0.45, 0.1), (0.15, 0.15, 0.6), (0.3, 0.3, 0.3))
 
