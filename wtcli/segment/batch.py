@@ -9,7 +9,11 @@ For each image ``REL`` (its path relative to the input folder, or its name), und
 
 and once the batch ends, ``instances.json`` (every finished image in one COCO file, ready for
 ``contours`` and ``pitch``) and ``report.json`` (per file: ok / error, counts, outputs).
-Every file is written atomically. A failing image is recorded and the batch goes on.
+Every file is written atomically. A failing image is recorded and the batch goes on; a broken
+or looping symbolic link to an image is such a failure too, not skipped. Each run first removes
+temporaries a kill left (``.NAME.XXXXXXXX``); ``--resume`` redoes an image whose instances file
+cannot be read; a run where no image succeeds removes an earlier ``instances.json`` rather than
+leave it beside a report that says ``instances: null``.
 """
 
 from __future__ import annotations
@@ -22,7 +26,8 @@ import cv2
 import numpy as np
 
 from wtcli.errors import InputError, WtError
-from wtcli.jsonio import atomic_write_bytes, document, write_json
+from wtcli.jsonio import atomic_write_bytes, document, os_reason, write_json
+from wtcli.outputs import remove_stale, remove_temp_files
 from wtcli.masks import LABELS, Instances, instances_document, read_instances, write_instances
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff")
@@ -51,14 +56,26 @@ class ImageResult:
 
 def find_images(path: Path, recursive: bool = False) -> tuple[Path, list[Path]]:
     """(root, images): a single image -> (its folder, [it]); a folder -> its jpg/png/tif files."""
-    if not path.exists():
-        raise InputError(f"{path}: no such file or folder")
+    try:
+        path.stat()
+    except FileNotFoundError:
+        kind = "broken symbolic link" if path.is_symlink() else "no such file or folder"
+        raise InputError(f"{path}: {kind}") from None
+    except OSError as e:
+        raise InputError(f"{path}: cannot read ({os_reason(e)})") from None
     if path.is_file():
         if path.suffix.lower() not in IMAGE_SUFFIXES:
             raise InputError(f"{path}: not an image (expected {', '.join(IMAGE_SUFFIXES)})")
         return path.parent, [path]
-    it = path.rglob("*") if recursive else path.iterdir()
-    files = sorted(p for p in it if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES
+    if not path.is_dir():
+        raise InputError(f"{path}: not a file or folder")
+    try:
+        it = list(path.rglob("*") if recursive else path.iterdir())
+    except OSError as e:  # no read or no execute permission on the folder
+        raise InputError(f"{e.filename or path}: cannot list the folder ({os_reason(e)})") from None
+    # A link whose target is missing or loops is kept, so it fails visibly in the report.
+    files = sorted(p for p in it if (p.is_file() or (p.is_symlink() and not p.exists()))
+                   and p.suffix.lower() in IMAGE_SUFFIXES
                    and not any(part.startswith(".") for part in p.relative_to(path).parts))
     if not files:
         hint = "" if recursive else " (add --recursive to look in subfolders)"
@@ -77,8 +94,11 @@ def read_image(path: Path) -> np.ndarray:
     """BGR uint8 [H, W, 3]; 16-bit and grey TIFFs are converted; anything else is InputError."""
     try:
         data = np.fromfile(str(path), dtype=np.uint8)
+    except FileNotFoundError:
+        kind = "broken symbolic link" if path.is_symlink() else "file not found"
+        raise InputError(f"{path}: {kind}") from None
     except OSError as e:
-        raise InputError(f"{path}: cannot read ({e.__class__.__name__})") from None
+        raise InputError(f"{path}: cannot read ({os_reason(e)})") from None
     try:
         img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
     except cv2.error as e:  # OpenCV refuses to allocate a decompression bomb
@@ -115,14 +135,16 @@ def segment_paths(path: Path, out: Path, segment: Callable[[np.ndarray], Instanc
                   on_progress: Callable[[ImageResult], None] | None = None) -> list[ImageResult]:
     """Run ``segment`` (BGR image -> Instances) over an image or folder, writing the files above."""
     root, files = find_images(path, recursive)
+    remove_temp_files(out)
     results: list[ImageResult] = []
     for f in files:
         rel = str(f.relative_to(root)) if path.is_dir() else f.name
         outs = output_paths(out, rel)
         res = ImageResult(rel=rel, source=str(f), status="ok")
         try:
-            if resume and all(p.is_file() for p in outs.values()):
-                (img_rec, inst), = read_instances(outs["instances"])
+            done = _finished(outs) if resume else None
+            if done is not None:
+                img_rec, inst = done
                 res.status, res.instances = "skipped", inst
                 res.width, res.height = int(img_rec["width"]), int(img_rec["height"])
             else:
@@ -138,13 +160,36 @@ def segment_paths(path: Path, out: Path, segment: Callable[[np.ndarray], Instanc
                 write_instances(outs["instances"], [_image_record(1, rel, f, res)], [inst])
             res.counts = counts_of(res.instances)
         except WtError as e:
-            res.status, res.error, res.instances = "error", str(e), None
-        except (ValueError, OSError, cv2.error, MemoryError) as e:
-            res.status, res.error, res.instances = "error", f"{e.__class__.__name__}: {e}", None
+            res.status, res.error, res.instances = "error", _naming(str(e), f), None
+        except OSError as e:
+            res.status, res.instances = "error", None
+            res.error = f"{e.filename or f}: {os_reason(e)}"
+        except (ValueError, cv2.error, MemoryError) as e:
+            res.status, res.instances = "error", None
+            res.error = _naming(f"{e.__class__.__name__}: {e}", f)
         results.append(res)
         if on_progress:
             on_progress(res)
     return results
+
+
+def _finished(outs: dict[str, Path]) -> tuple[dict, Instances] | None:
+    """(image record, instances) of an image a previous run finished, or None: outputs missing,
+    or an instances file that cannot be read (damaged, edited) -- then the image is redone."""
+    if not all(p.is_file() for p in outs.values()):
+        return None
+    try:
+        items = read_instances(outs["instances"])
+    except InputError:
+        return None
+    if len(items) != 1:
+        return None
+    return items[0]
+
+
+def _naming(message: str, source: Path) -> str:
+    """An image's error message, naming the image if it does not already."""
+    return message if str(source) in message else f"{source}: {message}"
 
 
 def _image_record(iid: int, rel: str, src: Path, res: ImageResult) -> dict[str, Any]:
@@ -158,6 +203,8 @@ def write_batch_files(out: Path, results: list[ImageResult], settings: dict[str,
     if done:
         write_instances(out / "instances.json", images, [r.instances for r in done],
                         extra={"settings": settings})
+    else:
+        remove_stale(out / "instances.json")  # it would hold an earlier run's images
     report = document(REPORT_SCHEMA, 1, {
         "settings": settings,
         "images": [r.to_dict(out) for r in results],
