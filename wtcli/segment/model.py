@@ -48,9 +48,9 @@ DEFAULT_WEIGHTS = "wtseg-r18s.pt"
 # shorter side INFER_MIN_SIZE, longer side at most INFER_MAX_SIZE (16:9 frames keep the scale:
 # 1024 x 576, not 768 x 432). 576 is above the training sizes on purpose: a 640 x 480 render is
 # upscaled 1.2x, so thin blades span more feature cells. On 400 development renders (seeds
-# 7 000 000 +, run-8 weights) against 480: blade / tower / nacelle IoU 0.686 / 0.815 / 0.687 ->
-# 0.696 / 0.833 / 0.708, right blade count 94.2 -> 95.3 %, theta error 1.48 -> 1.39 deg; 528 and
-# 624 were no better than 480 on count and theta (models/README.md). Cost: 1.34x the time, measured.
+# 7 000 000 +, the network of 2026-12-01) against 480: blade / tower / nacelle IoU 0.686 / 0.815 /
+# 0.687 -> 0.696 / 0.833 / 0.708, right blade count 94.2 -> 95.3 %, theta error 1.48 -> 1.39 deg;
+# 528 and 624 were no better than 480 on count and theta (docs/segment.md). Cost: 1.34x the time.
 INFER_MIN_SIZE = 576
 INFER_MAX_SIZE = 1024
 TRAIN_MIN_SIZES = (320, 352, 384, 416)
@@ -83,7 +83,8 @@ class _Backbone(nn.Module):
     parameter names), plus a fine level "p2" at stride 4 for the mask head only: the stride-8
     level upsampled, plus the trunk's stride-4 features through a small branch whose last conv
     starts at zero. Blades are mostly 2-5 px wide at 640 x 480 (instance IoU 0.42 below 3 px,
-    0.85 above 12 px, run 17): at stride 8 a blade's edges fall inside one feature cell."""
+    0.85 above 12 px, measured before this level existed): at stride 8 a blade's edges fall
+    inside one feature cell."""
 
     def __init__(self, trunk: nn.Module):
         super().__init__()
@@ -209,9 +210,9 @@ def average_weights(paths: list[str | Path], out: str | Path) -> Path:
     float32, saved as float16; integer ones, BatchNorm's counters, from the first file), with
     the first file's meta plus ``weight_average``: the files it is the mean of.
 
-    Two runs of one lineage averaged can beat both: the shipped file of session 18 (runs 14 and
-    16) and of session 25 (runs 18 and 19) each kept most of the newer run's gain on the renders
-    and were better than either run on the real photos (models/README.md)."""
+    Two runs of one lineage averaged can beat both: two of the shipped model's ancestors were
+    such means, each keeping most of the newer run's gain on the renders and better than either
+    run on the real photos (docs/train.md)."""
     if len(paths) < 2:
         raise ModelError("expected at least two weights files to average")
     models, metas = [], []
