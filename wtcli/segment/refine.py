@@ -3,13 +3,12 @@ own resolution.
 
 The network's masks are 28 x 28 per box, predicted from features of stride 4 and more: their
 edges land a pixel or two off, which on blades a few pixels wide is most of the IoU lost
-(measured on 60 development renders, run 18: blade IoU 0.777; the same masks with every pixel
-within 1 px of their boundary set right 0.917, within 2 px 0.940). Here a small MLP looks at
-each pixel within ``BAND`` px of an instance's boundary — the photo around it (PATCH x PATCH),
-the mask around it, the instance's class, the mean colours inside and just outside the instance,
-and the same two colours near the pixel (LOCAL_WIN) — and says whether it belongs to the
-instance's class. Pixels farther from the
-boundary keep the network's answer.
+(measured on 60 development renders with an earlier network: blade IoU 0.777; the same masks
+with every pixel within 1 px of their boundary set right 0.917, within 2 px 0.940). Here a
+small MLP looks at each pixel within ``BAND`` px of an instance's boundary — the photo around
+it (PATCH x PATCH), the mask around it, the instance's class, the mean colours inside and just
+outside the instance, and the same two colours near the pixel (LOCAL_WIN) — and says whether
+it belongs to the instance's class. Pixels farther from the boundary keep the network's answer.
 
 Trained by ``wtinspect train-refiner`` (docs/train-refiner.md) on our own renders, with the
 segmenter's own masks as input; weights in ``models/wtseg-refine.pt``.
@@ -53,20 +52,16 @@ DEFAULT_REFINER = "wtseg-refine.pt"
 REFINE_MAX_SIZE = 1600
 # A pixel outside the mask joins it at refiner probability ADD_AT; one inside leaves it only
 # below KEEP_AT of its class. Removing is where renders and real photos disagree: the photos'
-# hand-drawn masks are more generous at the edges than our renders' labels. With the shipped
+# hand-drawn masks are more generous at the edges than our renders' labels. With the first
 # refiner, leaving at 0.3 / 0.2 / 0.1 / never gave blade IoU on the 38 real photos (first pass,
 # unrefined 0.756) 0.748 / 0.751 / 0.754 / -, while on 60 development renders (unrefined
-# 0.777 / 0.818 / 0.771) 0.3 gave the best tower and nacelle IoU. So blade pixels leave the mask
-# only when the refiner is sure: below 0.1 until session 25, 0.2 since the averaged network of
-# session 25 (real blade IoU 0.758 / 0.755 / 0.753 at 0.1 / 0.2 / 0.3; 100 development renders
-# 0.828 / 0.836 / 0.838), which keeps the real photos where the old network at 0.1 had them;
-# 0.3 since session 31: 200 development renders 0.8533 -> 0.8560 blade IoU with the network of
-# sessions 29-30, and the real photos still above their 0.75 goal (session 31's network:
-# 0.761 -> 0.759); 0.4 since session 32, with the refiner trained on that network's masks:
-# 200 development renders 0.8554 / 0.8590 / 0.8597 / 0.8570 at 0.2 / 0.3 / 0.4 / 0.5 (the
-# refiner before at 0.3: 0.8583), real photos 0.761 / 0.759 at 0.3 / 0.4; kept at 0.4 with
-# session 33's refiner, trained on twice the renders: 200 development renders 0.8630 / 0.8641 at
-# 0.3 / 0.4.
+# 0.777 / 0.818 / 0.771) 0.3 gave the best tower and nacelle IoU. So blade pixels leave the
+# mask only when the refiner is sure: below 0.4, the best on development renders with the
+# shipped pair (200 renders, blade IoU 0.8630 / 0.8641 at 0.3 / 0.4; the refiner before it
+# 0.8554 / 0.8590 / 0.8597 / 0.8570 at 0.2 / 0.3 / 0.4 / 0.5), while the real photos stay above
+# their 0.75 goal (0.761 / 0.759 at 0.3 / 0.4). The threshold rose with each better network
+# (0.1, 0.2, 0.3, 0.4): after training the segmenter further, retrain the refiner and choose it
+# again.
 ADD_AT = 0.5
 KEEP_AT = {"blade": 0.4, "tower": 0.3, "nacelle": 0.3}
 
