@@ -58,12 +58,12 @@ def test_classes_are_periodic_and_mirror_symmetric(theta, k):
 @given(az=st.floats(0, 360), n=st.integers(2, 5), thick=st.floats(4, 30),
        taper=st.floats(0.1, 1.0), length=st.floats(70, 140),
        hx=st.floats(-40, 40), hy=st.floats(-30, 30), nacelle=st.booleans())
-# Found by CI in session 13: thin blades that do not taper lost to the "wide tip" rule (all four
+# Found by CI: thin blades that do not taper lost to the "wide tip" rule (all four
 # dropped, or one of five), since pixel noise made a tip look wider.
 @example(az=67.0, n=4, thick=4.0, taper=1.0, length=74.0, hx=0.0, hy=0.0, nacelle=True)
 @example(az=67.0, n=4, thick=4.0, taper=1.0, length=74.0, hx=0.0, hy=0.0, nacelle=False)
 @example(az=1.0, n=5, thick=5.0, taper=1.0, length=73.0, hx=0.0, hy=0.0, nacelle=False)
-# Found by CI in session 19: one of four such blades, 15 % wider at the tip by pixel noise (less
+# Found by CI: one of four such blades, 15 % wider at the tip by pixel noise (less
 # than a pixel on average), was taken for the tower.
 @example(az=12.0, n=4, thick=4.0, taper=1.0, length=70.0, hx=1.75, hy=0.0, nacelle=False)
 def test_random_rotors_give_their_angles(az, n, thick, taper, length, hx, hy, nacelle):

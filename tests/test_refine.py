@@ -112,11 +112,10 @@ def test_shipped_refiner_moves_a_wrong_edge_to_the_blade(change):
     before, after = _iou(wrong, truth), _iou(out.masks[0], truth)
     # A blade pixel leaves its mask only where the refiner is sure (KEEP_AT, chosen for the
     # real photos' generous masks), so a mask too wide gains less than one too thin, and less
-    # still where blade pixels leave only below 0.2 (sessions 25-30) or 0.1 (sessions 21-24).
-    # (Session 33's refiner: 0.720 -> 0.893 too wide at the shipped 0.4, 0.866 at 0.3, 0.840 at
-    # 0.2, 0.807 at 0.1, float32 and bfloat16 alike; 0.617 -> 0.896 too thin. Session 32's gave
-    # 0.845 at 0.4 and 0.900, session 23's 0.871 at 0.3 and 0.891, session 22's narrower one
-    # 0.961 too thin on this flat, noiseless blade, and all are worse on renders.)
+    # still at a lower KEEP_AT. (The shipped refiner: 0.720 -> 0.893 too wide at the shipped
+    # 0.4, 0.866 at 0.3, 0.840 at 0.2, 0.807 at 0.1, float32 and bfloat16 alike; 0.617 -> 0.896
+    # too thin. Earlier refiners gave 0.845 to 0.871 too wide and up to 0.961 too thin on this
+    # flat, noiseless blade, and all are worse on renders.)
     assert after > before + (0.14 if change == "dilate" else 0.25), (before, after)
     if change == "dilate":
         at_02 = R.refine_edges(R.load_refiner(), img, _inst(wrong), keep_at=0.2).masks[0]

@@ -666,9 +666,9 @@ def test_flip_gives_the_mirror_image_the_mirrored_answer():
     pass left out) breaks it; the shifts of ``mirror_boxes`` and ``unmirror_boxes`` keep it
     within a pixel. Not every edge: where an edge is ambiguous (the tower's top under the
     nacelle) the two directions may keep different proposals (the tower's box, up to 7.6 px apart
-    with session 18's weights), so every box but one must agree to the pixel. Instances are
-    paired by mask, not by rank: two scoring within 0.001 (the nacelle and a blade tip, session
-    29's weights) may swap places between the two."""
+    with an earlier network), so every box but one must agree to the pixel. Instances are
+    paired by mask, not by rank: two scoring within 0.001 (the nacelle and a blade tip, seen
+    with an earlier network) may swap places between the two."""
     from wtcli.synth.render import render_sample
 
     model = infer.load_model(None, "cpu")
