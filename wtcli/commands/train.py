@@ -51,7 +51,7 @@ def train(
                                        "CPU that does bf16 natively (faster steps), else fp32."),
     fine_lr_mult: float = typer.Option(1.0, "--fine-lr-mult",
                                        help="The mask head's stride-4 branch learns at this times "
-                                            "--lr (run 19: 10)."),
+                                            "--lr (the shipped model: 10)."),
     average_with: Optional[Path] = typer.Option(None, "--average-with",
                                                 help="Also write OUT/model-average.pt: the run's "
                                                      "weights averaged with these (e.g. the --init "
