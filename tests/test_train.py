@@ -174,8 +174,8 @@ def test_cli_train_sizes_not_numbers_exit_3(cli, tmp_path):
 
 
 def test_cli_train_sizes_above_the_renders_exit_4(cli, tmp_path):
-    """A size the renders cannot give is refused up front (it used to be dropped silently:
-    session 13's run asked for 448-576 on 640 x 480 renders and trained at 448 and 480)."""
+    """A size the renders cannot give is refused up front, not dropped silently (a run asking
+    for 448-576 on 640 x 480 renders would train at 448 and 480 only)."""
     res = cli("train", "--sizes", "448,576", "--out", tmp_path / "r")
     assert res.exit_code == ExitCode.CONFIG
     assert "576" in res.output and "--width 768 --height 576" in res.output
