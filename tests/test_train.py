@@ -277,3 +277,197 @@ def test_tiny_run_averaged_with_its_init(tmp_path):
     k = "roi_heads.box_head.fc6.weight"
     i, t, avg = (m.state_dict()[k] for m in w)
     assert torch.allclose(avg, (i + t) / 2, atol=1e-3) and not torch.equal(i, t)
+
+
+# ---- labelled real photos: semantic masks -> instances, mixed batches, held-out sequences ----
+def _blade(hub, angle_deg, length=120, root=14, tip=4):
+    import math
+
+    a = math.radians(angle_deg)
+    d, n = np.array([math.cos(a), -math.sin(a)]), np.array([math.sin(a), math.cos(a)])
+    h = np.array(hub, float)
+    return np.round([h + n * root / 2, h + d * length + n * tip / 2, h + d * length - n * tip / 2,
+                     h - n * root / 2]).astype(np.int32)
+
+
+def _semantic_rotor(angles, hub=(200, 150), hub_disk=True, size=(320, 400), blade_root=14):
+    """Class 1 blades from ``hub`` at ``angles`` (degrees, counter-clockwise from +x, y up),
+    class 2 tower below the hub, nacelle box and (optionally) hub disk, as WTA masks label them."""
+    import cv2
+
+    sem = np.zeros(size, np.uint8)
+    cv2.rectangle(sem, (hub[0] - 8, hub[1]), (hub[0] + 8, size[0] - 1), 2, -1)
+    cv2.rectangle(sem, (hub[0] - 22, hub[1] - 10), (hub[0] + 22, hub[1] + 10), 2, -1)
+    for a in angles:
+        cv2.fillPoly(sem, [_blade(hub, a, root=blade_root)], 1)
+    if hub_disk:
+        cv2.circle(sem, hub, 9, 2, -1)
+    return sem
+
+
+@pytest.mark.parametrize("angles,hub_disk", [((90, 210, 330), True), ((90, 210, 330), False),
+                                             ((30, 150, 270), True), ((45, 165, 285), True),
+                                             ((10, 130, 250), False)])
+def test_semantic_split_gives_three_blades_at_their_angles(angles, hub_disk):
+    from wtcli.segment.real import blade_angles, split_semantic
+
+    s = split_semantic(_semantic_rotor(angles, hub_disk=hub_disk))
+    labels = list(s.instances.labels)
+    assert labels.count("blade") == 3 and labels.count("tower") == 1, labels
+    assert len(s.hubs) == 1 and np.hypot(s.hubs[0][0] - 200, s.hubs[0][1] - 150) < 3
+    got = sorted(a for _, a in blade_angles(s))
+    err = [abs((g - w + 180) % 360 - 180) for g, w in zip(got, sorted(angles))]
+    assert max(err) < 2.0, (got, angles)
+    # Every labelled pixel is in exactly one instance: nothing lost, nothing twice.
+    sem = _semantic_rotor(angles, hub_disk=hub_disk)
+    cover = s.instances.masks.sum(axis=0)
+    assert cover.max() == 1 and np.array_equal(cover == 1, sem > 0)
+
+
+def test_semantic_split_joins_a_tower_cut_by_the_lower_blade():
+    from wtcli.segment.real import split_semantic
+
+    sem = _semantic_rotor((90, 210, 270), blade_root=24)  # the lower blade wider than the tower
+    import cv2
+
+    assert cv2.connectedComponents((sem == 2).astype(np.uint8))[0] - 1 >= 2  # cut apart
+    labels = list(split_semantic(sem).instances.labels)
+    assert labels.count("tower") == 1 and labels.count("blade") == 3, labels
+
+
+def test_semantic_split_nacelle_close_up_and_strays():
+    from wtcli.segment.real import split_semantic
+
+    sem = np.zeros((300, 300), np.uint8)
+    sem[40:290, 140:156] = 2  # a shaft 16 px wide, 250 tall
+    sem[20:40, 100:200] = 2  # a nacelle 100 px wide on top of it
+    s = split_semantic(sem)
+    assert sorted(s.instances.labels) == ["nacelle", "tower"]
+    nac = s.instances.of("nacelle").masks[0]
+    assert nac[20:40, 100:200].all() and not nac[60:].any()
+    close = np.zeros((200, 300), np.uint8)
+    close[80:140, 20:280] = 1  # a blade filling the frame, no tower: one blade, no hub
+    close[5:7, 5:7] = 1  # 4 stray pixels: dropped
+    s = split_semantic(close)
+    assert list(s.instances.labels) == ["blade"] and s.hubs == ()
+    assert split_semantic(np.zeros((50, 60), np.uint8)).instances.image_size == (50, 60)
+
+
+def test_view_types_and_sequences():
+    from wtcli.segment.real import sequences, view_type
+
+    assert view_type("single blade close-up (tip), ground behind") == "close-up"
+    assert view_type("distant, three turbines; main rotor oblique") == "distant"
+    assert view_type("rear three-quarter view, whole rotor") == "rear-oblique"
+    assert view_type("rear close view, whole rotor") == "rear"
+    assert view_type("close front-oblique view of hub") == "front-oblique"
+    assert view_type("close front view of the hub from above") == "front"
+    assert view_type("side-oblique, whole rotor") == "oblique"
+    assert view_type("two turbines, rotors near edge-on") == "side"
+    assert view_type("steep downward nadir view") == "nadir"
+    assert view_type("close; blades cut by frame") == "other"
+    names = (["a_03t", "a_04t", "b_09"] + [f"a_{k:02d}" for k in range(1, 11)]
+             + [f"a_{k:02d}" for k in (20, 22, 24, 26, 28, 30, 32, 33)] + ["c_01", "c_02"])
+    seqs = sequences(names)
+    assert seqs[:3] == ["other"] * 3 and seqs[-2:] == ["other"] * 2
+    assert set(seqs[3:13]) == {"a_01-10"} and set(seqs[13:21]) == {"a_20-33"}
+
+
+def _photo_folder(root, n=4):
+    """A folder as ../shared/real-photos is laid out: images/, masks/, manifest.csv."""
+    import cv2
+
+    (root / "images").mkdir(parents=True)
+    (root / "masks").mkdir()
+    rows = ["image,mask,site,view"]
+    rng = np.random.default_rng(0)
+    for k in range(n):
+        sem = _semantic_rotor((90 + 7 * k, 210 + 7 * k, 330 + 7 * k), size=(240, 320), hub=(160, 110))
+        img = rng.integers(60, 120, (240, 320, 3)).astype(np.uint8)
+        img[sem == 1], img[sem == 2] = 235, 200
+        name = f"s_{k + 1:02d}"
+        cv2.imwrite(str(root / "images" / f"{name}.jpg"), img)
+        cv2.imwrite(str(root / "masks" / f"{name}.png"), sem)
+        rows.append(f"images/{name}.jpg,masks/{name}.png,s,front view whole rotor")
+    (root / "manifest.csv").write_text("\n".join(rows) + "\n")
+    return root
+
+
+def test_real_dataset_reads_a_photo_folder_and_holds_out_sequences(tmp_path):
+    import csv
+
+    root = _photo_folder(tmp_path / "photos")
+    ds = D.RealDataset(root, augment=False)
+    assert len(ds) == 4 and set(ds.sequences) == {"other"}
+    s = ds.load(1)
+    assert s.image.shape == (240, 320, 3) and list(s.instances.labels).count("blade") == 3
+    x, t = ds[1]
+    assert x.shape == (3, 240, 320) and sorted(t["labels"].tolist()) == [1, 1, 1, 2, 3]
+    # A sequence column names the flights; holding one out leaves the others.
+    rows = list(csv.reader((root / "manifest.csv").open()))
+    rows[0].append("sequence")
+    for k, r in enumerate(rows[1:]):
+        r.append("f1" if k < 3 else "f2")
+    with (root / "manifest.csv").open("w", newline="") as f:
+        csv.writer(f).writerows(rows)
+    assert len(D.RealDataset(root, holdout=("f2",))) == 3
+    with pytest.raises(ConfigError, match="f9.*f1, f2"):
+        D.RealDataset(root, holdout=("f9",))
+    with pytest.raises(ConfigError, match="every photo is held out"):
+        D.RealDataset(root, holdout=("f1", "f2"))
+
+
+def test_real_share_per_batch_on_average_and_repeatable():
+    from wtcli.segment.train import real_in_batch
+
+    cfg = TrainConfig(batch_size=2, real_share=0.3, seed=4)
+    ks = [real_in_batch(cfg, b) for b in range(4000)]
+    assert set(ks) == {0, 1} and abs(np.mean(ks) / 2 - 0.3) < 0.02
+    assert ks == [real_in_batch(cfg, b) for b in range(4000)]
+    full = TrainConfig(batch_size=3, real_share=1.0)
+    assert {real_in_batch(full, b) for b in range(50)} == {3}
+
+
+def test_mixed_stream_resumes_where_it_stood(tmp_path, monkeypatch):
+    from wtcli.segment.train import _mixed_batches
+
+    monkeypatch.setattr(D, "collate", lambda b: list(b))
+
+    class Keys(torch.utils.data.Dataset):
+        def __getitem__(self, key):
+            return key
+
+    cfg = _tiny(tmp_path, batch_size=4, real_share=0.3, real=str(tmp_path))
+    it = _mixed_batches(Keys(), cfg, 0)
+    first = [next(it) for _ in range(6)]
+    assert next(_mixed_batches(Keys(), cfg, 4)) == first[4]
+    reals = [p for b in first for w, p in b if w == "real"]
+    bases = [p for b in first for w, p in b if w == "base"]
+    assert reals == list(range(len(reals))) and bases == list(range(len(bases)))  # no repeats
+
+
+def test_train_mixes_real_photos_and_holds_a_sequence_out(tmp_path):
+    root = _photo_folder(tmp_path / "photos")
+    s = train(_tiny(tmp_path, real=str(root), real_share=0.5, eval_count=0, batch_size=2))
+    assert s["iterations"] == 2 and s["config"]["real"] == str(root)
+    meta = load_weights(build_model(), tmp_path / "run" / "model.pt")
+    assert meta["real"] == str(root) and meta["real_share"] == 0.5
+    with pytest.raises(ConfigError, match="--real-holdout-sequence needs --real"):
+        train(_tiny(tmp_path, out=str(tmp_path / "r2"), real_holdout=("other",)))
+    with pytest.raises(ConfigError, match="real-share"):
+        train(_tiny(tmp_path, out=str(tmp_path / "r3"), real=str(root), real_share=0.0))
+
+
+def test_train_refuses_a_folder_holding_a_run(tmp_path, cli):
+    """As train-refiner: a run folder is continued with --resume or left alone (exit 3),
+    never overwritten."""
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "metrics.json").write_text("{}")
+    with pytest.raises(InputError, match="holds a run already.*--resume"):
+        train(_tiny(tmp_path))
+    assert (run / "metrics.json").read_text() == "{}"
+    res = cli("train", "--iterations", "1", "--out", run)
+    assert res.exit_code == ExitCode.INPUT and "holds a run already" in res.output
+    res = cli("train", "--real", tmp_path / "no-photos", "--out", tmp_path / "r")
+    assert res.exit_code == ExitCode.INPUT and "--real" in res.output

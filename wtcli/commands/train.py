@@ -1,5 +1,5 @@
-"""`wtinspect train`: train (or fine-tune) the segmenter on synthetic renders or a COCO dataset
-(docs/train.md)."""
+"""`wtinspect train`: train (or fine-tune) the segmenter on synthetic renders or a COCO dataset,
+labelled real photos mixed in (docs/train.md)."""
 
 from __future__ import annotations
 
@@ -56,10 +56,24 @@ def train(
                                                 help="Also write OUT/model-average.pt: the run's "
                                                      "weights averaged with these (e.g. the --init "
                                                      "file)."),
-    resume: bool = typer.Option(False, "--resume", help="Continue from OUT/last.ckpt."),
+    real: Optional[Path] = typer.Option(None, "--real",
+                                        help="Labelled real photos mixed in: a folder with "
+                                             "manifest.csv and semantic masks (0 background, 1 "
+                                             "blade, 2 tower; split into instances), or a COCO "
+                                             "instances JSON."),
+    real_share: float = typer.Option(0.3, "--real-share",
+                                     help="Share of each batch from --real, on average (0-1]."),
+    real_holdout: Optional[list[str]] = typer.Option(None, "--real-holdout-sequence",
+                                                     metavar="SEQ",
+                                                     help="Leave this flight sequence of --real "
+                                                          "out (repeatable), to measure on it."),
+    resume: bool = typer.Option(False, "--resume",
+                                help="Continue from OUT/last.ckpt (a folder holding a run is "
+                                     "otherwise refused)."),
     json_out: bool = typer.Option(False, "--json", help="Print the run summary JSON on stdout."),
 ) -> None:
-    """Train the blade/tower/nacelle Mask R-CNN; resumable; evaluates at the end."""
+    """Train the blade/tower/nacelle Mask R-CNN on renders, COCO data and labelled real photos;
+    resumable; evaluates at the end."""
     from rich.table import Table
 
     from wtcli.console import err_console
@@ -74,7 +88,7 @@ def train(
         try:
             train_sizes = tuple(int(v) for v in sizes.split(","))
         except ValueError:
-            raise InputError(f"--sizes {sizes!r}: expected whole pixel sizes separated by commas, "
+            raise ConfigError(f"--sizes {sizes!r}: expected whole pixel sizes separated by commas, "
                              "e.g. 384,416,448,480") from None
         # Renders are never blown up (a run would silently train at fewer sizes than asked):
         # render larger instead.
@@ -85,8 +99,12 @@ def train(
                              f"side ({width}x{height}); renders are not enlarged, so render larger "
                              f"(e.g. --width {round(max(big) * width / short)} --height "
                              f"{round(max(big) * height / short)}) or leave those sizes out")
+    if real is not None and not real.exists():
+        raise InputError(f"{real}: no such photo folder or COCO file (--real)")
     if data is not None and not data.exists():
         raise InputError(f"{data}: no such dataset (a COCO instances JSON or a folder with one)")
+    from wtcli.outputs import writable_folder
+    writable_folder(out)  # before hours of training, not after
     cfg = TrainConfig(out=str(out), data=str(data) if data else None, iterations=iterations,
                       batch_size=batch_size, lr=lr, warmup=warmup, max_minutes=max_minutes,
                       width=width, height=height, seed=seed, init=str(init) if init else None,
@@ -94,7 +112,9 @@ def train(
                       val=str(val) if val else None, device=device, workers=workers, threads=threads,
                       augment=not no_augment, stops=stops, resume=resume, train_sizes=train_sizes,
                       precision=precision, fine_lr_mult=fine_lr_mult,
-                      average_with=str(average_with) if average_with else None)
+                      average_with=str(average_with) if average_with else None,
+                      real=str(real) if real else None, real_share=real_share,
+                      real_holdout=tuple(real_holdout or ()))
     report = _Report(iterations, max_minutes, checkpoint_every)
     try:
         summary = run_training(cfg, progress=report.step)

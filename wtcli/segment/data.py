@@ -1,5 +1,7 @@
-"""Training data for the segmenter: synthetic renders made on the fly, or a COCO instances
-dataset on disk (ours from `synth`, or the user's own annotated photos), plus augmentation.
+"""Training data for the segmenter: synthetic renders made on the fly, a COCO instances
+dataset on disk (ours from `synth`, or the user's own annotated photos), or labelled real
+photos (``RealDataset``: a folder of photos with semantic masks, split into instances by
+``wtcli.segment.real``, or a COCO file), plus augmentation.
 
 Images are BGR uint8 [H, W, 3] (OpenCV) until ``to_target`` turns them into the RGB float
 tensors [3, H, W] in [0, 1] and target dicts (boxes xyxy float, labels 1..3, masks uint8)
@@ -122,6 +124,100 @@ class CocoDataset(torch.utils.data.Dataset):
         s = self.load(i)
         if self.augment:
             s = augment(s, np.random.default_rng((self.aug_seed, self.epoch, int(i))))
+        return to_target(s)
+
+
+class RealDataset(torch.utils.data.Dataset):
+    """Labelled real photos, flight sequences in ``holdout`` left out: a folder with
+    ``manifest.csv`` and semantic masks (``wtcli.segment.real``; photos read at most
+    ``real.MAX_SIDE`` px long, each split once and kept packed in memory), or a COCO instances
+    file or folder (an image's ``sequence`` field names its sequence; without one, the
+    sequences ``real.sequences`` derives from the file names)."""
+
+    def __init__(self, path: str | Path, holdout: tuple[str, ...] = (), augment: bool = True,
+                 aug_seed: int = 0):
+        from wtcli.errors import ConfigError
+        from wtcli.segment import real as R
+
+        self.path = Path(path)
+        self.coco: CocoDataset | None = None
+        if R.is_photo_folder(self.path):
+            self.photos = R.read_folder(self.path)
+            seqs = [p.sequence for p in self.photos]
+        else:
+            if not self.path.exists():
+                raise InputError(f"{self.path}: no such folder or file (a photo folder with "
+                                 "manifest.csv, or a COCO instances JSON)")
+            self.coco = CocoDataset(self.path, augment=False)
+            self.photos = []
+            infos = [info for info, _ in self.coco.items]
+            derived = R.sequences([Path(str(i.get("file_name", ""))).stem for i in infos])
+            seqs = [str(i.get("sequence") or d) for i, d in zip(infos, derived)]
+        known = sorted(set(seqs))
+        unknown = [q for q in holdout if q not in known]
+        if unknown:
+            raise ConfigError(f"--real-holdout-sequence {unknown[0]}: not a sequence of {self.path} "
+                              f"(it has: {', '.join(known)})")
+        self.sequences = seqs
+        self.keep = [i for i, q in enumerate(seqs) if q not in set(holdout)]
+        if not self.keep:
+            raise ConfigError(f"{self.path}: every photo is held out (--real-holdout-sequence); "
+                              "nothing left to train on")
+        self.augment, self.aug_seed, self.epoch = augment, int(aug_seed), 0
+        self._cache: dict[int, tuple[np.ndarray, np.ndarray, tuple[int, int]]] = {}
+
+    def __len__(self) -> int:
+        return len(self.keep)
+
+    def load(self, i: int) -> Sample:
+        k = self.keep[i]
+        if self.coco is not None:
+            return self.coco.load(k)
+        from wtcli.segment import real as R
+
+        img, sem = R.read_pair(self.photos[k])
+        if k not in self._cache:  # the split is the slow part (~0.3 s a photo): once per process
+            inst = R.split_semantic(sem, MIN_INSTANCE_PIXELS).instances
+            self._cache[k] = (inst.labels, np.packbits(inst.masks, axis=-1), inst.image_size)
+        labels, packed, (h, w) = self._cache[k]
+        if not len(labels):
+            return Sample(img, Instances.empty(h, w))
+        return Sample(img, Instances(labels, np.unpackbits(packed, axis=-1, count=w).astype(bool)))
+
+    def __getitem__(self, i: int):
+        s = self.load(i)
+        if self.augment:
+            s = augment(s, np.random.default_rng((self.aug_seed, 2, self.epoch, int(i))))
+        return to_target(s)
+
+
+class MixedDataset(torch.utils.data.Dataset):
+    """Renders (or a ``--data`` COCO set) and real photos in one stream. Item ``("base", pos)``
+    is the ``pos``-th base image drawn: for renders the scene ``pos`` on from the seed's own
+    stretch (``synth_start``), for a dataset on disk each pass in its own order; ``("real",
+    pos)`` likewise for the photos. Augmentation is keyed by the draw, so resuming repeats the
+    stream exactly."""
+
+    def __init__(self, base, real: RealDataset, seed: int = 0, synth_start: int = 0):
+        self.base, self.real, self.seed = base, real, int(seed)
+        self.synth_start = int(synth_start)
+
+    def __len__(self) -> int:
+        return len(self.base)
+
+    @staticmethod
+    def _index(n: int, seed: int, stream: int, pos: int) -> int:
+        order = np.random.default_rng((seed, stream, pos // n)).permutation(n)
+        return int(order[pos % n])
+
+    def __getitem__(self, key):
+        which, pos = key[0], int(key[1])
+        if which == "base" and isinstance(self.base, SynthDataset):
+            return self.base[(self.synth_start + pos) % len(self.base)]
+        ds, stream = (self.base, 5) if which == "base" else (self.real, 3)
+        s = ds.load(self._index(len(ds), self.seed, stream, pos))
+        if ds.augment:
+            s = augment(s, np.random.default_rng((ds.aug_seed, stream + 1, pos)))
         return to_target(s)
 
 

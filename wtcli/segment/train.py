@@ -1,11 +1,12 @@
-"""Train the segmenter: on synthetic renders made on the fly (default) or a COCO dataset.
+"""Train the segmenter: on synthetic renders made on the fly (default) or a COCO dataset,
+with labelled real photos mixed in (``real``, ``real_share`` of each batch on average).
 
 ``train(TrainConfig(...), progress=callback)`` runs the loop; it never prints. Everything a run
 needs to continue lives in ``OUT/last.ckpt`` (model, optimizer, iteration, config), written
 atomically every ``checkpoint_every`` iterations and at the end, so ``resume=True`` picks up
 where a stopped run left off. The final weights go to ``OUT/model.pt`` in the shipped format
 (float16 state dict, see ``wtcli.segment.model.save_weights``) and the end-of-run evaluation to
-``OUT/metrics.json``.
+``OUT/metrics.json``. A run folder that holds a run already is refused unless resumed.
 
 Learning rate: linear warm-up, then cosine decay to 2 % of the peak over the run. The schedule
 follows the run's progress, the larger of iterations done / ``iterations`` and time spent /
@@ -71,6 +72,11 @@ class TrainConfig:
     # 0.004 after 3 461 steps, 0.011 in run 19 at 10x).
     fine_lr_mult: float = 1.0
     average_with: str | None = None  # also write OUT/model-average.pt: the mean with these weights
+    # Labelled real photos mixed in (a photo folder with manifest.csv and semantic masks, or a
+    # COCO file): ``real_share`` of every batch on average, these flight sequences left out.
+    real: str | None = None
+    real_share: float = 0.3
+    real_holdout: tuple[str, ...] = ()
 
     def check(self) -> None:
         def need(ok: bool, what: str) -> None:
@@ -87,6 +93,9 @@ class TrainConfig:
         need(self.eval_count >= 0, "expected --eval-count >= 0")
         need(self.max_minutes is None or self.max_minutes > 0, "expected --max-minutes > 0")
         need(0.0 <= self.stops <= 1.0, f"expected --stops in [0, 1], got {self.stops}")
+        need(0.0 < self.real_share <= 1.0, f"expected --real-share in (0, 1], got {self.real_share}")
+        need(self.real is not None or not self.real_holdout,
+             "--real-holdout-sequence needs --real (the photos it leaves out)")
         need(self.precision in PRECISIONS,
              f"expected --precision one of {', '.join(PRECISIONS)}, got {self.precision!r}")
         need(len(self.train_sizes) > 0 and all(64 <= v <= 2048 for v in self.train_sizes),
@@ -115,9 +124,48 @@ def _worker_init(_: int) -> None:
 
 def make_dataset(cfg: TrainConfig):
     if cfg.data:
-        return D.CocoDataset(cfg.data, augment=cfg.augment, aug_seed=cfg.seed)
-    return D.SynthDataset(cfg.synth_count, cfg.width, cfg.height, augment=cfg.augment,
-                          aug_seed=cfg.seed, stops=cfg.stops)
+        base = D.CocoDataset(cfg.data, augment=cfg.augment, aug_seed=cfg.seed)
+    else:
+        base = D.SynthDataset(cfg.synth_count, cfg.width, cfg.height, augment=cfg.augment,
+                              aug_seed=cfg.seed, stops=cfg.stops)
+    if not cfg.real:
+        return base
+    real = D.RealDataset(cfg.real, holdout=tuple(cfg.real_holdout), augment=cfg.augment,
+                         aug_seed=cfg.seed)
+    return D.MixedDataset(base, real, seed=cfg.seed, synth_start=cfg.seed * SYNTH_STRETCH)
+
+
+def real_in_batch(cfg: TrainConfig, b: int) -> int:
+    """How many real photos batch ``b`` holds: ``real_share`` of the batch, the fraction made
+    up by a draw keyed on (seed, b), so the share holds on average and resuming repeats it."""
+    want = cfg.real_share * cfg.batch_size
+    k = int(math.floor(want + 1e-9))
+    if k < cfg.batch_size and np.random.default_rng((cfg.seed, 6, b)).random() < want - k:
+        k += 1
+    return k
+
+
+def _mixed_batches(ds, cfg: TrainConfig, start_it: int):
+    """Endless batches of ("base", pos) and ("real", pos) items (``MixedDataset``); batch ``b``
+    is a function of (seed, b), so a resumed run continues the same stream."""
+    base_pos = real_pos = 0
+    for b in range(start_it):  # where the stream stood: cheap, one draw a batch
+        k = real_in_batch(cfg, b)
+        real_pos, base_pos = real_pos + k, base_pos + cfg.batch_size - k
+
+    def plan():
+        nonlocal base_pos, real_pos
+        b = start_it
+        while True:
+            k = real_in_batch(cfg, b)
+            yield ([("real", real_pos + j) for j in range(k)]
+                   + [("base", base_pos + j) for j in range(cfg.batch_size - k)])
+            real_pos, base_pos, b = real_pos + k, base_pos + cfg.batch_size - k, b + 1
+
+    yield from torch.utils.data.DataLoader(
+        ds, batch_sampler=plan(), num_workers=cfg.workers, collate_fn=D.collate,
+        worker_init_fn=_worker_init if cfg.workers else None,
+        prefetch_factor=2 if cfg.workers else None)
 
 
 def _param_groups(model, params: list, fine_lr_mult: float) -> list[dict]:
@@ -183,6 +231,7 @@ def _save_ckpt(path: Path, model, opt, it: int, cfg: TrainConfig, elapsed: float
 def _cfg_dict(cfg: TrainConfig) -> dict[str, Any]:
     d = asdict(cfg)
     d["train_sizes"] = list(cfg.train_sizes)
+    d["real_holdout"] = list(cfg.real_holdout)
     return d
 
 
@@ -199,8 +248,13 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
     if cfg.average_with:  # a bad file fails now, not after hours of training
         load_weights(build_model(), cfg.average_with)
     out = Path(cfg.out)
-    out.mkdir(parents=True, exist_ok=True)
     ckpt_path = out / CKPT_NAME
+    if not cfg.resume:
+        held = [n for n in (CKPT_NAME, "model.pt", "metrics.json") if (out / n).is_file()]
+        if held:  # as train-refiner: a finished or stopped run is never overwritten silently
+            raise InputError(f"{out}: holds a run already ({', '.join(held)}); --resume to "
+                             "continue it, or pick another --out")
+    out.mkdir(parents=True, exist_ok=True)
     device = pick_device(cfg.device)
     if cfg.threads or device.type == "cpu":
         # One thread unless asked: on a shared or busy CPU, torch's thread pool spends more
@@ -225,7 +279,7 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
     ds = make_dataset(cfg)
     model.to(device)
     sizes = tuple(cfg.train_sizes)
-    if not cfg.data:  # never blow small renders up: train at most at their own size
+    if not cfg.data:  # never blow small renders up (mixed with photos too): at most their own size
         sizes = tuple(s for s in sizes if s <= min(cfg.width, cfg.height)) or (min(cfg.width, cfg.height),)
     set_train_sizes(model, sizes, max(max(sizes) * 4 // 3, max(cfg.width, cfg.height)))
     precision = resolve_precision(cfg.precision, device)
@@ -248,7 +302,8 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
     if precision == "bf16":
         backbone_in_bf16(model)
     if it < cfg.iterations:
-        for images, targets in _batches(ds, cfg, start_it):
+        stream = _mixed_batches if cfg.real else _batches
+        for images, targets in stream(ds, cfg, start_it):
             elapsed = elapsed0 + time.monotonic() - t0
             prog = it / cfg.iterations
             if budget_s:
@@ -288,6 +343,9 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
     set_infer_size(model)
     save_weights(model, out / "model.pt", meta={"iterations": it, "train_seconds": round(elapsed, 1),
                                                 "data": cfg.data or "synthetic", "seed": cfg.seed,
+                                                **({"real": cfg.real, "real_share": cfg.real_share,
+                                                    "real_holdout": list(cfg.real_holdout)}
+                                                   if cfg.real else {}),
                                                 "precision": precision,
                                                 "mask_offset_px": MASK_OFFSET_PX})
     if cfg.average_with:

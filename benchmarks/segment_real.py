@@ -1,0 +1,256 @@
+"""The segmenter on labelled real photos, cross-validated by flight sequence, per view type.
+
+    python benchmarks/segment_real.py [--real DIR] [--model PATH | --runs DIR [--train ARGS]]
+                                      [--only SEQ ...] [--limit N] [--out FILE]
+
+Photos: a folder with ``manifest.csv`` and semantic masks (default ``../shared/real-photos``
+beside the repository: the WTA dataset, G. Zampokas et al., "WTA/TLA: A UAV-captured Dataset
+for Semantic Segmentation of Energy Infrastructure", ICUAS 2022,
+doi:10.1109/ICUAS54217.2022.9836096). Its flight sequences (``wtcli.segment.real.sequences``)
+are the folds: every photo is measured with a model that trained on none of its sequence,
+since consecutive frames are near-duplicates.
+
+* ``--model PATH`` (default the shipped ``models/wtseg-r18s.pt``): one model for every fold. It
+  must not have trained on a fold's photos: a file whose meta names ``real`` photos is accepted
+  only for the sequences in its ``real_holdout``.
+* ``--runs DIR``: fold ``SEQ`` is measured with ``DIR/SEQ/model.pt``; with ``--train ARGS`` the
+  folds missing one are trained first, ``wtinspect train ARGS --real DIR --real-holdout-sequence
+  SEQ --out DIR/SEQ`` (a stopped fold resumed), so cross-validation is one command.
+
+Each photo is segmented as ``segment`` does by default (second look for small turbines, mirror
+pass, edge refiner) and scored against its semantic mask: blade IoU (blade instances' union
+against class 1), tower IoU (tower and nacelle against class 2, which holds the nacelle and the
+hub), and nacelle IoU on the photos where ``split_semantic`` tells a nacelle apart (a heuristic
+truth). IoU is per photo where the prediction or the truth has the class, then averaged: per
+view type (``wtcli.segment.real.VIEW_TYPES``), per fold and pooled. Front and front-oblique
+views whose truth splits into exactly three blades at one hub: the share where pitch reads
+exactly three blades, and the blade-angle error against pitch run on the split truth (each true
+blade matched to the measured one of nearest phi; theta mod 180, phi mod 360).
+
+Writes ``benchmarks/results/segment_real.json`` (``_results.save``) or ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from wtcli.errors import WtError  # noqa: E402
+from wtcli.segment import real as R  # noqa: E402
+
+FRONT_VIEWS = ("front", "front-oblique")
+
+
+def iou(a: np.ndarray, b: np.ndarray) -> float | None:
+    u = np.logical_or(a, b).sum()
+    return float(np.logical_and(a, b).sum() / u) if u else None
+
+
+def model_for_fold(args, seq: str, log) -> Path:
+    if args.runs is None:
+        path = Path(args.model) if args.model else ROOT / "models" / "wtseg-r18s.pt"
+        check_not_trained_on(path, seq)
+        return path
+    run = Path(args.runs) / seq
+    path = run / "model.pt"
+    if not path.is_file():
+        if args.train is None:
+            raise SystemExit(f"{path}: no model for fold {seq} (train it: --train ARGS)")
+        cmd = [sys.executable, "-m", "wtcli", "train", *args.train.split(), "--real", str(args.real),
+               "--real-holdout-sequence", seq, "--out", str(run)]
+        if (run / "last.ckpt").is_file():
+            cmd.append("--resume")
+        log(f"fold {seq}: {' '.join(cmd[2:])}")
+        subprocess.run(cmd, check=True, cwd=ROOT)
+    check_not_trained_on(path, seq)
+    return path
+
+
+def check_not_trained_on(path: Path, seq: str) -> None:
+    import torch
+
+    meta = torch.load(path, map_location="cpu", weights_only=True).get("meta", {})
+    if meta.get("real") and seq not in (meta.get("real_holdout") or []):
+        raise SystemExit(f"{path} trained on real photos ({meta['real']}) without holding out "
+                         f"sequence {seq}: its figures on {seq} would be on photos it learned")
+
+
+def front_truth(split) -> object | None:
+    """Pitch on the split truth when it is one rotor of exactly three blades, else None."""
+    from wtcli.pitch import pitch_from_instances
+
+    if len(split.hubs) != 1 or sum(h == 0 for h in split.blade_hub) != 3:
+        return None
+    try:
+        res = pitch_from_instances(split.instances, expected_blades=None)
+    except WtError:
+        return None
+    return res if len(res) == 3 else None
+
+
+def angle_errors(truth, pred) -> list[tuple[float, float]]:
+    """(|theta error| mod 180, |phi error| mod 360) per true blade, matched greedily by phi."""
+    out, free = [], list(pred.blades)
+    for t in truth.blades:
+        if not free:
+            break
+        d = [abs((p.phi_deg - t.phi_deg + 180) % 360 - 180) for p in free]
+        k = int(np.argmin(d))
+        p = free.pop(k)
+        out.append((abs((p.theta_deg - t.theta_deg + 90) % 180 - 90), d[k]))
+    return out
+
+
+def measure(photo: R.RealPhoto, model, args) -> dict:
+    from wtcli.pitch import pitch_from_instances
+    from wtcli.segment.infer import segment_image
+
+    img, sem = R.read_pair(photo, args.max_side)
+    inst = segment_image(img, model, refine=not args.no_refine)
+    conf = inst[inst.scores >= 0.5] if len(inst) else inst
+    h, w = sem.shape
+    empty = np.zeros((h, w), bool)
+    blade = conf.of("blade").union() if len(conf) else empty
+    nac = conf.of("nacelle").union() if len(conf) else empty
+    tower = (conf.of("tower").union() | nac) if len(conf) else empty
+    rec = {"image": photo.name, "sequence": photo.sequence, "view": photo.view,
+           "blade_iou": iou(blade, sem == R.BLADE), "tower_iou": iou(tower, sem == R.TOWER)}
+    split = R.split_semantic(sem)
+    true_nac = split.instances.of("nacelle")
+    if len(true_nac):
+        rec["nacelle_iou"] = iou(nac, true_nac.union())
+    if photo.view in FRONT_VIEWS:
+        truth = front_truth(split)
+        if truth is not None:
+            try:
+                pred = pitch_from_instances(inst, expected_blades=None)
+            except WtError:
+                pred = None
+            rec["front_blades"] = len(pred) if pred is not None else 0
+            if pred is not None:
+                rec["angle_errors"] = [[round(a, 3), round(b, 3)] for a, b in angle_errors(truth, pred)]
+    return {k: (round(v, 4) if isinstance(v, float) else v) for k, v in rec.items()}
+
+
+def summarise(rows: list[dict]) -> dict:
+    out: dict = {"photos": len(rows)}
+    for key in ("blade_iou", "tower_iou", "nacelle_iou"):
+        v = [r[key] for r in rows if r.get(key) is not None]
+        out[key] = round(float(np.mean(v)), 4) if v else None
+        out[key.replace("_iou", "_photos")] = len(v)
+    front = [r for r in rows if "front_blades" in r]
+    if front:
+        errs = [e for r in front for e in r.get("angle_errors", [])]
+        out["front_views_3_true_blades"] = len(front)
+        out["front_exactly_3"] = round(sum(r["front_blades"] == 3 for r in front) / len(front), 4)
+        out["theta_error_deg_mean"] = round(float(np.mean([e[0] for e in errs])), 3) if errs else None
+        out["phi_error_deg_mean"] = round(float(np.mean([e[1] for e in errs])), 3) if errs else None
+        out["blades_matched"] = len(errs)
+    return out
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--real", default=str(ROOT.parent / "shared" / "real-photos"),
+                    help="photo folder with manifest.csv and semantic masks")
+    ap.add_argument("--model", default=None, help="one model for every fold (default: shipped)")
+    ap.add_argument("--runs", default=None, help="fold SEQ uses RUNS/SEQ/model.pt")
+    ap.add_argument("--train", default=None, metavar="ARGS",
+                    help="train missing folds: wtinspect train ARGS --real ... "
+                         "--real-holdout-sequence SEQ --out RUNS/SEQ")
+    ap.add_argument("--only", nargs="*", default=None, metavar="SEQ", help="these folds only")
+    ap.add_argument("--limit", type=int, default=None,
+                    help="at most N photos per fold, spread over it (a quicker subset)")
+    ap.add_argument("--max-side", type=int, default=None,
+                    help="read photos at most this long (default: as they are)")
+    ap.add_argument("--no-refine", action="store_true", help="without the edge refiner")
+    ap.add_argument("--threads", type=int, default=None, help="torch CPU threads")
+    ap.add_argument("--out", default=None, help="results file (default benchmarks/results/segment_real.json)")
+    args = ap.parse_args(argv)
+    if args.train is not None and args.runs is None:
+        ap.error("--train needs --runs (where the fold runs go)")
+    if args.model and args.runs:
+        ap.error("--model and --runs: one or the other")
+    import torch
+
+    from wtcli.segment.infer import load_model
+
+    if args.threads:
+        torch.set_num_threads(args.threads)
+
+    def log(msg: str) -> None:
+        print(msg, file=sys.stderr, flush=True)
+
+    real = Path(args.real)
+    if not R.is_photo_folder(real):
+        log(f"{real}: no photo folder with manifest.csv; nothing to measure")
+        return {}
+    photos = R.read_folder(real)
+    folds: dict[str, list[R.RealPhoto]] = defaultdict(list)
+    for p in photos:
+        folds[p.sequence].append(p)
+    names = list(folds) if args.only is None else args.only
+    unknown = [n for n in names if n not in folds]
+    if unknown:
+        raise SystemExit(f"--only {unknown[0]}: not a sequence of {real} (it has: {', '.join(folds)})")
+    rows, models = [], {}
+    t0 = time.perf_counter()
+    for seq in names:
+        fold = folds[seq]
+        if args.limit and len(fold) > args.limit:
+            fold = [fold[int(k)] for k in np.linspace(0, len(fold) - 1, args.limit).round()]
+        path = model_for_fold(args, seq, log)
+        models[seq] = str(path)
+        model = load_model(path)
+        t1 = time.perf_counter()
+        for p in fold:
+            rows.append(measure(p, model, args))
+        log(f"fold {seq}: {len(fold)} photos in {time.perf_counter() - t1:.0f} s; "
+            f"blade IoU {summarise(rows[-len(fold):])['blade_iou']}")
+    secs = time.perf_counter() - t0
+    res = {
+        "data": {"root": str(real), "photos_in_folder": len(photos),
+                 "source": "WTA dataset, Zampokas et al., ICUAS 2022, doi:10.1109/ICUAS54217.2022.9836096"},
+        "models": models,
+        "settings": {"refine": not args.no_refine, "max_side": args.max_side, "limit": args.limit,
+                     "folds": names},
+        "pooled": summarise(rows),
+        "per_view": {v: summarise([r for r in rows if r["view"] == v])
+                     for v in R.VIEW_TYPES if any(r["view"] == v for r in rows)},
+        "per_fold": {s: summarise([r for r in rows if r["sequence"] == s]) for s in names},
+        "seconds": round(secs, 1), "seconds_per_photo": round(secs / max(1, len(rows)), 2),
+        "per_photo": rows,
+    }
+    print(f"{'view':14s} {'photos':>6s} {'blade':>6s} {'tower':>6s} {'nacelle':>8s}")
+    for v, s in [*res["per_view"].items(), ("pooled", res["pooled"])]:
+        f = [("-" if s[k] is None else f"{s[k]:.3f}") for k in ("blade_iou", "tower_iou", "nacelle_iou")]
+        print(f"{v:14s} {s['photos']:6d} {f[0]:>6s} {f[1]:>6s} {f[2]:>8s}")
+    p = res["pooled"]
+    if "front_exactly_3" in p:
+        print(f"front views with 3 true blades: {p['front_views_3_true_blades']}, exactly 3 read "
+              f"{100 * p['front_exactly_3']:.0f} %, mean |theta error| {p['theta_error_deg_mean']} deg, "
+              f"|phi error| {p['phi_error_deg_mean']} deg over {p['blades_matched']} blades")
+    print(f"{len(rows)} photos in {secs:.0f} s ({res['seconds_per_photo']} s each)")
+    try:
+        from _results import save
+    except ImportError:  # the results writer absent: plain JSON
+        from wtcli.jsonio import write_json
+
+        write_json(args.out or ROOT / "benchmarks" / "results" / "segment_real.json", res)
+    else:
+        save("segment_real", res, argv=argv, out=args.out)
+    return res
+
+
+if __name__ == "__main__":
+    main()
