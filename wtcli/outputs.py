@@ -16,6 +16,7 @@ import os
 import re
 import tempfile
 from pathlib import Path
+from typing import Iterable
 
 from wtcli.errors import OutputError
 from wtcli.jsonio import write_failed
@@ -92,3 +93,16 @@ def _reason(e: OSError) -> str:
     if e.errno == errno.EROFS:
         return "read-only file system"
     return e.strerror or e.__class__.__name__
+
+
+def check_outputs(files: Iterable[str | Path | None] = (),
+                  folders: Iterable[str | Path | None] = ()) -> None:
+    """One call per command, before its expensive work: every output file and folder it was
+    given (None: not asked for) can be written. OutputError (exit 3) naming the first that
+    cannot."""
+    for f in files:
+        if f is not None:
+            writable_file(f)
+    for d in folders:
+        if d is not None:
+            writable_folder(d)

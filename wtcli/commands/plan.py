@@ -85,6 +85,8 @@ def register(app: typer.Typer) -> None:
             aircraft(dji_kmz)
             if export_dir is None:
                 raise ConfigError("--dji-kmz needs --export-dir (where to write the .kmz files)")
+        from wtcli.outputs import check_outputs
+        check_outputs(files=[out, picture], folders=[export_dir])  # before planning, not after
         mission = load_mission(turbines_yaml)
         azimuths, sources = blade_azimuths(mission, list(inputs or []), _pose(camera_pose))
         for tid, src in sources.items():

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from wtcli.errors import ConfigError, InputError
+from wtcli.errors import ConfigError
 
 VIEW_CHOICES = ("front", "oblique", "side", "rear", "mixed")
 
@@ -42,8 +42,9 @@ def synth(
         raise ConfigError(f"--view: expected one of {', '.join(VIEW_CHOICES)}, got {view!r}")
     if labels not in LABELS:
         raise ConfigError(f"--labels: expected one of {', '.join(LABELS)}, got {labels!r}")
-    if out.exists() and not out.is_dir():
-        raise InputError(f"{out}: exists and is not a folder; choose another output folder")
+    from wtcli.outputs import writable_folder
+
+    writable_folder(out, "output folder")
     summary = render_dataset(out, count, seed, width, height,
                              view=None if view == "mixed" else view, progress=not json_out,
                              labels=labels)

@@ -48,6 +48,8 @@ def train_refiner(
         widths = tuple(int(v) for v in hidden.split(","))
     except ValueError:
         raise ConfigError(f"--hidden {hidden}: two layer widths, e.g. 512,256") from None
+    from wtcli.outputs import writable_folder
+    writable_folder(out)  # before the training, not after
     cfg = RefinerConfig(out=str(out), images=images, model=str(model) if model else None, seed=seed,
                         epochs=epochs, max_pixels=max_pixels, lr=lr, eval_count=eval_count,
                         threads=threads, resume=resume, hidden=widths)
