@@ -98,3 +98,17 @@ def test_the_model_cards_figures_are_rendered_too(report, tmp_path):
 def test_save_refuses_a_measured_key(results, tmp_path):
     with pytest.raises(ValueError, match="measured"):
         results.save("x", {"measured": 1}, argv=[], out=tmp_path / "x.json")
+
+
+def test_the_readmes_figures_are_the_benchmark_pages():
+    """The README quotes a few headline figures; each must be on docs/benchmarks.md as it is."""
+    import re
+
+    readme = (ROOT / "README.md").read_text()
+    start = readme.index("The shipped segmentation model")
+    quoted = readme[start:readme.index("`docs/benchmarks.md`", start)]
+    page = (ROOT / "docs" / "benchmarks.md").read_text()
+    figures = re.findall(r"\d+\.\d+", quoted)
+    assert len(figures) >= 5, quoted
+    missing = [f for f in figures if f not in page]
+    assert not missing, f"README.md quotes {missing}, not on docs/benchmarks.md"
