@@ -42,7 +42,8 @@ class _Boundary(TyperGroup):
 
     def list_commands(self, ctx: typer.Context) -> list[str]:
         # Keep the pipeline order in --help rather than alphabetical.
-        order = ["synth", "segment", "contours", "pitch", "plan", "fly", "train", "train-refiner"]
+        order = ["synth", "segment", "contours", "pitch", "site", "plan", "fly", "train",
+                 "train-refiner"]
         names = list(self.commands)
         return sorted(names, key=lambda n: (order.index(n) if n in order else len(order), n))
 

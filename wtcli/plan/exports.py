@@ -2,10 +2,11 @@
 DJI WPML ``.kmz`` on request (``wtcli.plan.dji_kmz``). docs/plan.md "Mission exports".
 
 One file per UAV and sortie (a battery swap ends a sortie: a mission file is flown on one
-battery). Every position is the exact WGS84 conversion of the plan's ENU point (``wtcli.plan.geodesy``). Waypoints are in
-frame 3: altitude relative to the launch point (home) = the point's height minus home's, both
-exact (not the ENU z difference, which is d^2/2R lower at d from the origin). Home is the launch
-point in frame 0, AMSL (site.origin.alt plus the ellipsoid-height difference). Commands used:
+battery). Every position is the exact WGS84 conversion of the plan's ENU point
+(``wtcli.plan.geodesy``). Waypoints are in frame 3: altitude relative to the launch point (home)
+= the point's height minus home's, both exact (not the ENU z difference, which is d^2/2R lower
+at d from the origin). Home is the launch point in frame 0, AMSL (site.origin.alt plus the
+ellipsoid-height difference). Commands used:
 
 * 22 NAV_TAKEOFF to the take-off altitude, 16 NAV_WAYPOINT (p2 acceptance radius, p4 yaw = the
   camera heading: PX4 turns to it, ArduPilot Copter ignores it), 21 NAV_LAND at home;

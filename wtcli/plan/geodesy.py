@@ -2,11 +2,12 @@
 
 The site origin ``{"lat", "lon", "alt"}`` is the ENU point (0, 0, 0); ENU "up" is the ellipsoid
 normal there, so the ellipsoid d metres away lies d^2/2R below the ENU plane (1.96 m at 5 km):
-an ENU point at z lies about z + d^2/2R above the origin's height. Heights: there is no geoid model offline, so ``origin.alt`` (metres above mean
-sea level) is used as the origin's height and every other height is the origin's plus the exact
-WGS84 ellipsoid-height difference, i.e. the geoid is taken as parallel to the ellipsoid across
-the site (its undulation changes by centimetres to a few decimetres over 10 km). Exports derive
-every altitude from these exact heights (see ``wtcli.plan.exports``).
+an ENU point at z lies about z + d^2/2R above the origin's height. Heights: there is no geoid
+model offline, so ``origin.alt`` (metres above mean sea level) is used as the origin's height
+and every other height is the origin's plus the exact WGS84 ellipsoid-height difference, i.e.
+the geoid is taken as parallel to the ellipsoid across the site (its undulation changes by
+centimetres to a few decimetres over 10 km). Exports derive every altitude from these exact
+heights (see ``wtcli.plan.exports``).
 
 Planning treats each tower as vertical in the ENU frame, while a real tower stands on its own
 local vertical, tilted d/R from ENU up (0.09 deg at 10 km: 0.31 m at a 200 m blade tip). So sites
