@@ -16,10 +16,22 @@ import numpy as np
 
 from wtcli.errors import InputError
 from wtcli.geometry import Camera, Turbine
-from wtcli.jsonio import document, read_json, write_json
+from wtcli.jsonio import document, number, read_json, shown, write_json
 
 PLAN_SCHEMA = "wtinspect.plan"
 PLAN_VERSION = 1
+
+# What ``read_plan`` accepts: a plan is read back by ``fly`` and by flight software, so a number
+# that ``plan`` could never have written (an edit, a truncation) is refused, naming it.
+MAX_COORD_M = 1e6  # any position or length, m from the site origin (1000 km)
+LIMITS: dict[str, tuple[float, float]] = {
+    "safe_distance_m": (1e-3, 1000.0), "target_gsd_mm": (1e-3, 1000.0),
+    "t": (0.0, 1e7), "speed": (0.0, 100.0), "yaw_deg": (-360.0, 720.0),
+    "gimbal_pitch_deg": (-180.0, 180.0),
+    "hub_height": (1.0, 1000.0), "rotor_diameter": (1.0, 1000.0),
+    "width_px": (1, 100_000), "height_px": (1, 100_000), "focal_mm": (1e-3, 1e4),
+    "sensor_width_mm": (1e-3, 1e4), "lat": (-90.0, 90.0), "lon": (-180.0, 180.0),
+}
 
 
 @dataclass(frozen=True)
@@ -133,11 +145,33 @@ def write_plan(path: str | Path, plan: Plan) -> Path:
     return write_json(path, document(PLAN_SCHEMA, PLAN_VERSION, plan.to_dict()))
 
 
+def check_plan_numbers(doc: dict[str, Any], path: str | Path) -> None:
+    """Every number a plan file holds: finite (``read_json`` refuses NaN and Infinity), and in
+    range: the named ones within LIMITS, any other within +-MAX_COORD_M. InputError naming the
+    file, the place (``routes[0].waypoints[5].speed``) and the value."""
+
+    def walk(value: Any, where: str, key: str) -> None:
+        if isinstance(value, dict):
+            for k, v in value.items():
+                if where == "summary" or k == "summary":
+                    continue  # reporting only; fly and the exports never read it
+                walk(v, f"{where}.{k}" if where else str(k), str(k))
+        elif isinstance(value, list):
+            for i, v in enumerate(value):
+                walk(v, f"{where}[{i}]", key)
+        elif isinstance(value, (int, float)) and not isinstance(value, bool):
+            lo, hi = LIMITS.get(key, (-MAX_COORD_M, MAX_COORD_M))
+            number(value, f"{path}: {where}", lo, hi)
+
+    walk({k: v for k, v in doc.items() if k not in ("schema_version", "summary")}, "", "")
+
+
 def read_plan(path: str | Path) -> Plan:
     doc = read_json(path, schema=PLAN_SCHEMA, max_version=PLAN_VERSION)
+    check_plan_numbers(doc, path)
     try:
         return Plan.from_dict(doc)
     except KeyError as e:
-        raise InputError(f"{path}: plan is missing key {e.args[0]!r}") from None
-    except (TypeError, ValueError) as e:
-        raise InputError(f"{path}: invalid plan: {e}") from None
+        raise InputError(f"{path}: plan is missing key {shown(e.args[0])}") from None
+    except (TypeError, ValueError, AttributeError, IndexError) as e:
+        raise InputError(f"{path}: invalid plan: {str(e)[:200]}") from None
