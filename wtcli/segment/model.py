@@ -252,8 +252,7 @@ def load_weights(model: nn.Module, path: str | Path | None = None) -> dict[str, 
     try:
         blob = torch.load(p, map_location="cpu", weights_only=True)
     except Exception as e:  # noqa: BLE001 - any failure to unpickle means a bad file
-        raise ModelError(f"{p}: not a readable weights file ({e.__class__.__name__}: "
-                         f"{str(e).splitlines()[0][:120] if str(e) else 'corrupt'})") from None
+        raise ModelError(f"{p}: {_load_failure(e)}") from None
     if not isinstance(blob, dict):
         raise ModelError(f"{p}: expected a dict with 'state_dict', got {type(blob).__name__}")
     state = blob.get("state_dict", blob.get("model"))
@@ -262,6 +261,13 @@ def load_weights(model: nn.Module, path: str | Path | None = None) -> dict[str, 
         raise ModelError(f"{p}: weights are for architecture {arch!r}, this wtinspect builds {ARCH!r}")
     if not isinstance(state, dict):
         raise ModelError(f"{p}: no 'state_dict' in the file")
+    for k, v in state.items():
+        if not isinstance(v, torch.Tensor):
+            raise ModelError(f"{p}: state_dict entry {str(k)[:80]!r} is not a tensor")
+        # NaN or infinite weights load and run, but every score is NaN: no instance survives and
+        # every photo would come out "ok" with nothing found.
+        if v.is_floating_point() and not torch.isfinite(v).all():
+            raise ModelError(f"{p}: weights are corrupt: {str(k)[:80]!r} holds NaN or infinite values")
     ref = model.state_dict()
     state = {k: (v.to(ref[k].dtype) if k in ref and v.is_floating_point() else v)
              for k, v in state.items()}
@@ -280,6 +286,20 @@ def load_weights(model: nn.Module, path: str | Path | None = None) -> dict[str, 
         raise ModelError(f"{p}: weights do not fit the model ({' '.join(first)[:200]})") from None
     meta = blob.get("meta", {})
     return meta if isinstance(meta, dict) else {}
+
+
+def _load_failure(e: Exception) -> str:
+    """Why ``torch.load`` refused a file, in one whole sentence. torch's refusal of a pickle
+    holding code goes on to explain how to turn that safety off; the cut first line of it read
+    like advice to do so, so that case gets our own words."""
+    text = " ".join(str(e).split())
+    if "Weights only load failed" in text or "weights_only" in text:
+        return ("refused: the file holds Python objects besides tensors, which could run code "
+                "when loaded; only weights files saved by wtinspect are loaded")
+    first = text.split(". ")[0].rstrip(".")
+    if len(first) > 160:
+        first = first[:157] + "..."
+    return f"not a readable weights file ({e.__class__.__name__}: {first or 'corrupt'})"
 
 
 PRECISIONS = ("auto", "fp32", "bf16")
