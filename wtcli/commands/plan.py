@@ -22,8 +22,8 @@ def _pose(text: str | None):
         v = [float(x) for x in text.replace(";", ",").split(",")]
     except ValueError:
         v = []
-    if len(v) not in (6, 7):
-        raise ConfigError(f"--camera-pose: expected X,Y,Z,TX,TY,TZ[,ROLL] (ENU m of the camera and "
+    if len(v) not in (6, 7) or not all(abs(x) <= 1e6 for x in v):  # also refuses nan, inf
+        raise ConfigError(f"--camera-pose: expected X,Y,Z,TX,TY,TZ[,ROLL] (finite ENU m of the camera and "
                           f"of the point it looked at), got {text!r}")
     return CameraPose(tuple(v[:3]), tuple(v[3:6]), v[6] if len(v) == 7 else 0.0)
 
