@@ -57,6 +57,10 @@ class Section:
     command: str            # the command that measures it (shown while not measured yet)
     about: str
     figures: tuple[Figure, ...] = field(default_factory=tuple)
+    # For a benchmark that does not write its results file yet: the ``save`` call at the end of
+    # its main() that gives the keys below (what it computes today). A benchmark may save other
+    # keys; then its figures here change with it.
+    adopt: str = ""
 
 
 F = Figure
@@ -143,7 +147,8 @@ SECTIONS: tuple[Section, ...] = (
            "{:.2f} s wall, {:.2f} s CPU"),
          F("adaptive plan against the fixed \"Y\" pattern: mean coverage",
            ("adaptive_vs_fixed_y.adaptive.coverage_mean", "adaptive_vs_fixed_y.fixed-y.coverage_mean"),
-           "{:.1%} against {:.1%}"))),
+           "{:.1%} against {:.1%}")),
+        adopt='save("plan_benchmark", res)'),
     Section(
         "Coverage", "plan_coverage",
         "python benchmarks/plan_coverage.py",
@@ -152,7 +157,8 @@ SECTIONS: tuple[Section, ...] = (
         (F("blade coverage, mean over cases", ("summary.blade_average_mean",), "{:.1%}"),
          F("worst blade side, mean / min over cases", ("summary.min_side_mean", "summary.min_side_min"),
            "{:.1%} / {:.1%}"),
-         F("clearance violations", ("summary.violations",), "{}", "0"))),
+         F("clearance violations", ("summary.violations",), "{}", "0")),
+        adopt='save("plan_coverage", res)'),
     Section(
         "Plan safety over random sites", "plan_property",
         "python benchmarks/plan_property.py",
@@ -161,22 +167,25 @@ SECTIONS: tuple[Section, ...] = (
         (F("cases planned / refused", ("summary.planned", "summary.plan_errors"), "{} / {}"),
          F("clearance or gimbal violations", ("summary.violations",), "{}", "0"),
          F("smallest margin over the safe distance", ("summary.min_margin_over_safe_distance_m",),
-           "{:.2f} m", "≥ 0"))),
+           "{:.2f} m", "≥ 0")),
+        adopt='save("plan_property", {"summary": summary, "cases": res})'),
     Section(
         "Flight: the paper's scenarios", "fly_paper_table",
         "python benchmarks/fly_paper_table.py",
         "The four shipped scenarios (paper-s1 … paper-s4) planned and flown with the PID "
         "controller (eq. 10) and a manual pilot, beside the paper's Table 1.",
         (F("strong wind (paper-s2), automated: mean deviation",
-           ("rows[scenario=paper-s2].ours.automated.deviation_m",), "{:.2f} m", "≤ 0.5 m"),
+           ("seeds.0.rows[scenario=paper-s2].ours.automated.deviation_m",), "{:.2f} m", "≤ 0.5 m"),
          F("strong wind (paper-s2), automated: clearance violations",
-           ("rows[scenario=paper-s2].automated_safety.violations",), "{}", "0"),
+           ("seeds.0.rows[scenario=paper-s2].automated_safety.violations",), "{}", "0"),
          F("coverage, automated, paper-s1 / s2 / s3 / s4",
-           ("rows[scenario=paper-s1].ours.automated.coverage_pct",
-            "rows[scenario=paper-s2].ours.automated.coverage_pct",
-            "rows[scenario=paper-s3].ours.automated.coverage_pct",
-            "rows[scenario=paper-s4].ours.automated.coverage_pct"),
-           "{:.1f} / {:.1f} / {:.1f} / {:.1f} %", "≥ 97 %"))),
+           ("seeds.0.rows[scenario=paper-s1].ours.automated.coverage_pct",
+            "seeds.0.rows[scenario=paper-s2].ours.automated.coverage_pct",
+            "seeds.0.rows[scenario=paper-s3].ours.automated.coverage_pct",
+            "seeds.0.rows[scenario=paper-s4].ours.automated.coverage_pct"),
+           "{:.1f} / {:.1f} / {:.1f} / {:.1f} %", "≥ 97 %"),
+         F("done criteria met", ("done_criteria_met",), "{}", "True")),
+        adopt='save("fly_paper_table", {"seeds": out, "done_criteria_met": ok})'),
     Section(
         "Flight simulation speed", "fly_speed",
         "python benchmarks/fly_speed.py",
@@ -184,21 +193,26 @@ SECTIONS: tuple[Section, ...] = (
         "then measured.",
         (F("fly + measure, CPU seconds", ("total_cpu_s",), "{:.2f} s", "< 2 s"),
          F("deviation from the planned path, mean / max", ("deviation_mean_m", "deviation_max_m"),
-           "{:.3f} / {:.2f} m"))),
+           "{:.3f} / {:.2f} m")),
+        adopt='save("fly_speed", {"total_cpu_s": total, "deviation_mean_m": '
+              'float(res.deviation.mean()), "deviation_max_m": float(res.deviation.max())})'),
 )
 
 
 def lookup(doc: Any, path: str, where: str) -> Any:
-    """The value at a dotted ``path`` (keys may hold spaces; ``name[k=v]`` takes the list item
-    whose ``k`` reads ``v``)."""
+    """The value at a dotted ``path`` (keys may hold spaces; a number indexes a list;
+    ``name[k=v]`` takes the list item whose ``k`` reads ``v``)."""
     cur = doc
     for part in path.split("."):
         sel = None
         if part.endswith("]") and "[" in part:
             part, sel = part[:-1].split("[", 1)
-        if not isinstance(cur, dict) or part not in cur:
+        if isinstance(cur, list) and part.isdigit() and int(part) < len(cur):
+            cur = cur[int(part)]
+        elif isinstance(cur, dict) and part in cur:
+            cur = cur[part]
+        else:
             raise ReportError(f"{where}: no `{path}` (benchmarks/report.py shows it)")
-        cur = cur[part]
         if sel is not None:
             k, v = sel.split("=", 1)
             hits = [x for x in (cur or []) if isinstance(x, dict) and str(x.get(k)) == v]
