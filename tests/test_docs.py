@@ -3,6 +3,9 @@ copy of sample_images/ (and models/ linked), so the documented examples cannot r
 
 Convention for doc pages: a line ``$ wtinspect ARGS`` is run; a trailing ``# exit N`` states
 the expected exit code (default 0); other lines in the block are sample output, not checked.
+``# needs shared/PATH`` (alone or after ``exit N,``) marks an example that reads the shared
+data beside the repository (``../shared``, linked into the scratch folder as ``shared``): it is
+skipped where that is absent.
 """
 
 from __future__ import annotations
@@ -20,7 +23,10 @@ PAGES = sorted((ROOT / "docs").glob("*.md"))
 BLOCK = re.compile(r"```console\n(.*?)```", re.S)
 
 
-def commands(page: Path) -> list[tuple[list[str], int]]:
+SHARED = ROOT.parent / "shared"
+
+
+def commands(page: Path) -> list[tuple[list[str], int, str | None]]:
     out = []
     for block in BLOCK.findall(page.read_text(encoding="utf-8")):
         for line in block.splitlines():
@@ -29,7 +35,8 @@ def commands(page: Path) -> list[tuple[list[str], int]]:
             cmd, _, comment = line[2:].partition(" # ")
             m = re.search(r"exit (\d+)", comment)
             argv = shlex.split(cmd)
-            out.append((argv, int(m.group(1)) if m else 0))
+            needs = re.search(r"needs (\S+)", comment)
+            out.append((argv, int(m.group(1)) if m else 0, needs.group(1) if needs else None))
     return out
 
 
@@ -43,8 +50,12 @@ def test_doc_examples_run(page, tmp_path, monkeypatch, runner):
     shutil.copytree(ROOT / "sample_images", tmp_path / "sample_images")
     if (ROOT / "models").exists():
         os.symlink(ROOT / "models", tmp_path / "models")
+    if SHARED.is_dir() and any(needs for *_, needs in cmds):
+        os.symlink(SHARED, tmp_path / "shared")
     monkeypatch.chdir(tmp_path)
-    for argv, want in cmds:
+    for argv, want, needs in cmds:
+        if needs and not (tmp_path / needs).exists():
+            continue
         assert argv[0] == "wtinspect", f"{page.name}: examples must start with 'wtinspect': {argv}"
         res = runner.invoke(app, argv[1:])
         assert res.exit_code == want, (f"{page.name}: `{' '.join(argv)}` exited {res.exit_code}, "

@@ -68,8 +68,8 @@ class TrainConfig:
     train_sizes: tuple[int, ...] = field(default_factory=lambda: TRAIN_MIN_SIZES)
     precision: str = "auto"  # auto | fp32 | bf16: see model.resolve_precision
     # The mask head's stride-4 branch (backbone.fine, 45 248 parameters) learns at this times
-    # ``lr``: at the rate of the trained rest it grew slowly (run 18: its last conv's mean |w|
-    # 0.004 after 3 461 steps, 0.011 in run 19 at 10x).
+    # ``lr``: at the rate of the trained rest it grows slowly (its last conv's mean |w| was 0.004
+    # after 3 461 steps at 1x, 0.011 at 10x).
     fine_lr_mult: float = 1.0
     average_with: str | None = None  # also write OUT/model-average.pt: the mean with these weights
     # Labelled real photos mixed in (a photo folder with manifest.csv and semantic masks, or a
@@ -237,9 +237,13 @@ def _cfg_dict(cfg: TrainConfig) -> dict[str, Any]:
 
 def _load_ckpt(path: Path) -> dict[str, Any]:
     try:
-        return torch.load(path, map_location="cpu", weights_only=True)
+        ck = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # noqa: BLE001
         raise ModelError(f"{path}: cannot resume from this checkpoint ({e.__class__.__name__})") from None
+    missing = [k for k in ("state_dict", "optimizer", "iteration") if not isinstance(ck, dict) or k not in ck]
+    if missing:  # an edited or foreign file: say so rather than fail on the first lookup
+        raise ModelError(f"{path}: cannot resume from this checkpoint (no {', '.join(missing)} in it)")
+    return ck
 
 
 def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
@@ -281,7 +285,10 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
     sizes = tuple(cfg.train_sizes)
     if not cfg.data:  # never blow small renders up (mixed with photos too): at most their own size
         sizes = tuple(s for s in sizes if s <= min(cfg.width, cfg.height)) or (min(cfg.width, cfg.height),)
-    set_train_sizes(model, sizes, max(max(sizes) * 4 // 3, max(cfg.width, cfg.height)))
+    longest = max(max(sizes) * 4 // 3, max(cfg.width, cfg.height))
+    if cfg.real:  # photos are mostly 16:9: let their longer side follow the drawn size
+        longest = max(longest, max(sizes) * 16 // 9)
+    set_train_sizes(model, sizes, longest)
     precision = resolve_precision(cfg.precision, device)
     params = [p for p in model.parameters() if p.requires_grad]
     opt = torch.optim.AdamW(_param_groups(model, params, cfg.fine_lr_mult), lr=cfg.lr,
