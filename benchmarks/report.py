@@ -101,6 +101,19 @@ SECTIONS: tuple[Section, ...] = (
          F("front photos read with 3 blades", ("real.refined.front_blade_count_3", "real.front_views"),
            "{:.0%} of {}"))),
     Section(
+        "Segmentation: all real photos, by flight sequence", "segment_real",
+        "python benchmarks/segment_real.py",
+        "Every labelled photo of the WTA dataset folder, each measured with a model that trained on "
+        "none of its flight sequence (consecutive frames are near-duplicates), segmented as "
+        "`segment` does by default.",
+        (F("blade / tower IoU, pooled", ("pooled.blade_iou", "pooled.tower_iou", "pooled.photos"),
+           "{:.3f} / {:.3f} ({} photos)"),
+         F("front views with three true blades read as three",
+           ("pooled.front_exactly_3", "pooled.front_views_3_true_blades"), "{:.0%} of {}"),
+         F("blade angle θ error on them, mean", ("pooled.theta_error_deg_mean", "pooled.blades_matched"),
+           "{:.2f}° ({} blades)")),
+        adopt='save("segment_real", res, argv=argv, out=args.out)'),
+    Section(
         "Segmentation: speed", "segment_accuracy",
         "python benchmarks/segment_accuracy.py --threads 2",
         "One 1024 × 683 render, images per second in one process with the same thread count, "
