@@ -175,8 +175,8 @@ SECTIONS: tuple[Section, ...] = (
     Section(
         "Plan safety over random sites", "plan_property",
         "python benchmarks/plan_property.py",
-        "Random sites of 1–3 turbines and 1–3 UAVs, every waypoint and leg checked against every "
-        "turbine with the one turbine model.",
+        "Random sites (turbines, fleets, gimbal limits and safe distances drawn as the benchmark's "
+        "docstring says), every plan's waypoints and legs checked against every turbine.",
         (F("cases planned / refused", ("summary.planned", "summary.plan_errors"), "{} / {}"),
          F("clearance or gimbal violations", ("summary.violations",), "{}", "0"),
          F("smallest margin over the safe distance", ("summary.min_margin_over_safe_distance_m",),
