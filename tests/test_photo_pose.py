@@ -225,3 +225,23 @@ def test_refuses_a_pose_that_cannot_be_this_turbines_photo(enu, yaw, pitch, matc
         pose_from_metadata(m, t, ORIGIN, cam, "DJI_0007.JPG")
     with pytest.raises(ConfigError, match="no site.origin"):
         pose_from_metadata(m, t, None, cam, "DJI_0007.JPG")
+
+
+def test_camera_pose_of_photo_says_why_an_incomplete_pose_is_not_used(tmp_path):
+    from wtcli.photo_pose import camera_pose_of_photo
+
+    t = Turbine.with_rotor_azimuth(90, id="T1", base=(0, 0, 0), hub_height=80, rotor_diameter=90,
+                                   yaw_deg=180)
+    mission = SimpleNamespace(site_origin=ORIGIN, camera=Camera(640, 480, 16, 23.2))
+    img = np.full((48, 64, 3), 90, np.uint8)
+    p = tmp_path / "gps_only.jpg"
+    p.write_bytes(jpeg_with(img, exif_gps_app1(53.55, 9.99, 40.0)))
+    assert camera_pose_of_photo(p, t, mission) == \
+        (None, "the photo's tags lack GimbalPitchDegree, a heading, so not its own pose")
+    cv2.imwrite(str(tmp_path / "plain.jpg"), img)
+    assert camera_pose_of_photo(tmp_path / "plain.jpg", t, mission) == (None, None)
+    lat, lon, h = enu_to_geodetic(np.array([[0.0, -150.0, 80.0]]), ORIGIN)[0]
+    p = dji_photo(tmp_path / "DJI_0002.JPG", img, lat, lon, h, h - ORIGIN["alt"], 0.0, 0.0)
+    pose, how = camera_pose_of_photo(p, t, mission, "DJI_0002.JPG")
+    assert np.allclose(pose.position, [0, -150, 80], atol=0.02)
+    assert how.startswith("the photo's own pose (DJI XMP, EXIF GPS)")

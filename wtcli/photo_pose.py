@@ -321,3 +321,21 @@ def _llh_below(base: np.ndarray, origin: dict) -> tuple[float, float, float]:
 
     lat, lon, _ = enu_to_geodetic(np.asarray(base, float)[None], origin)[0]
     return float(lat), float(lon), float(origin["alt"])
+
+
+def camera_pose_of_photo(path: str | Path, turbine, mission, name: str | None = None):
+    """(CameraPose, what was read) from a photo's own tags for ``plan``'s back-projection, or
+    (None, why not) when it carries an incomplete pose, or (None, None) when it carries none."""
+    meta = read_photo_metadata(path)
+    name = name or str(path)
+    if meta.has_pose:
+        pp = pose_from_metadata(meta, turbine, mission.site_origin, mission.camera, name)
+        return pp.camera_pose(), pp.description
+    if meta == PhotoMetadata():
+        return None, None
+    need = {"a position": meta.has_position, "GimbalPitchDegree": meta.gimbal_pitch_deg is not None,
+            "a heading": meta.gimbal_yaw_deg is not None or meta.flight_yaw_deg is not None,
+            "a height": any(v is not None for v in (meta.relative_alt_m, meta.absolute_alt_m,
+                                                    meta.gps_alt_m))}
+    return None, ("the photo's tags lack " + ", ".join(k for k, ok in need.items() if not ok)
+                  + ", so not its own pose")
