@@ -1144,3 +1144,41 @@ def test_every_sortie_keeps_the_battery_reserve_with_detoured_transits():
     times = [x for r in plan.routes for x in _sortie_times(r)]
     assert len(times) >= 2 and max(times) <= usable + 1e-6
     assert max(r.summary["longest_sortie_s"] for r in plan.routes) == pytest.approx(max(times))
+
+
+# ---- the property suite, small ---------------------------------------------------------------------
+def _plan_property():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("plan_property",
+                                                  ROOT / "benchmarks" / "plan_property.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_independent_distance_is_never_below_the_models_lower_bound():
+    """The property suite's own distance (closed forms and elliptic sections) against the
+    model's, which promises a lower bound: the two must agree within the model's slack."""
+    pp = _plan_property()
+    t = make_turbine(az=33.0, yaw=20.0, blades=5, tower_base_radius=4.0)
+    rng = np.random.default_rng(7)
+    Q = t.hub_center + rng.normal(0, 15, (200, 3))
+    model = t.clearance(Q)
+    indep = np.array([pp.independent_min_clearance([t], Q[i:i + 1], 20.0) for i in range(len(Q))])
+    near = model < 15.0
+    assert (model[near] <= indep[near] + 1e-6).all()
+    assert np.median(indep[near] - model[near]) < 0.05  # a close bound, not a loose one
+
+
+@pytest.mark.parametrize("seed", [4, 1])
+def test_random_sites_plan_or_refuse_in_one_line_safely(seed):
+    """A few sites of benchmarks/plan_property.py (1 000 of them there): planned ones are
+    checked with the independent distance, the sorties and the coverage at half spacing."""
+    r = _plan_property().one(seed)
+    assert "crash" not in r, r.get("trace")
+    if "refused" in r:
+        assert r["one_line"] and r["exit"] in (4, 6)
+        return
+    assert not r["clearance_violation"] and not r["battery_overrun"]
+    assert r["min_side_fine"] >= r["min_side_coverage"]
