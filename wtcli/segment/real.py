@@ -16,8 +16,8 @@ makes them:
   pieces' long axes meet, when that is near, and the split made again. Blade parts touching no hub (close-ups,
   other turbines) are a blade each;
 * **nacelle**, where it can be told apart: on a tower at least four times as tall as its
-  shaft is wide, the rows at its top at least twice the shaft's width (nacelle and hub, as the
-  renders label them); a class-2 part no taller than 1.5 times its width (a nacelle seen close,
+  shaft is wide, the rows near its top (from within its top 15 %, down to at most 40 %) at least
+  twice the shaft's width (nacelle and hub, as the renders label them); a class-2 part no taller than 1.5 times its width (a nacelle seen close,
   no shaft below it) is a nacelle whole. Otherwise the class-2 part stays tower.
 
 Flight sequences: frames of one flight are near-duplicates, so a photo's figures count only
@@ -373,8 +373,8 @@ def _nacelle_part(tower: np.ndarray) -> np.ndarray | None:
     shaft = float(np.median(lower)) if len(lower) else 0.0
     if shaft > 0 and height >= 4 * shaft:
         wide = rows[ys[0]: ys[-1] + 1] >= 2 * shaft
-        if wide[0] or (len(wide) > 2 and wide[:3].any()):
-            top = int(np.argmax(wide))  # first wide row from the top
+        top = int(np.argmax(wide))  # first wide row from the top (a nacelle's top is rounded)
+        if wide.any() and top <= 0.15 * height:
             end = top
             while end + 1 < len(wide) and (wide[end + 1] or (end + 2 < len(wide) and wide[end + 2])):
                 end += 1
