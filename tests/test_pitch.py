@@ -536,7 +536,7 @@ def test_cli_bad_inputs(cli, tmp_path):
     colour = np.zeros((40, 40, 3), np.uint8)
     colour[:, :20] = (200, 120, 40)
     cv2.imwrite(str(tmp_path / "photo.png"), colour)
-    from wtcli.pitch import photo_input
+    from wtcli.chain import photo_input
     try:  # the segment stage may already take photos here
         photo_input(tmp_path / "photo.png", 20)
     except InputError:
@@ -547,7 +547,7 @@ def test_cli_bad_inputs(cli, tmp_path):
     one_line_error(cli("pitch", tmp_path / "photo.png", tmp_path / "tower.png"), 3,
                    "a photo among mask files")
     (tmp_path / "plan.json").write_text('{"schema": "wtinspect.plan", "schema_version": 1}')
-    one_line_error(cli("pitch", tmp_path / "plan.json"), 3, "expected a COCO instances JSON")
+    one_line_error(cli("pitch", tmp_path / "plan.json"), 3, "wtinspect.instances")
     (tmp_path / "c.json").write_text('{"schema": "wtinspect.contours", "schema_version": 7}')
     one_line_error(cli("pitch", tmp_path / "c.json"), 3, "schema_version 7")
     (tmp_path / "c2.json").write_text('{"schema": "wtinspect.contours", "schema_version": 1, '

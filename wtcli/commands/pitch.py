@@ -11,8 +11,9 @@ import typer
 from wtcli.console import err_console, make_progress
 from wtcli.errors import InputError, PartialFailure, PerceptionError
 from wtcli.jsonio import atomic_write_bytes, dumps, write_json
-from wtcli.pitch import (CANDIDATE_FLOOR, draw_pitch_overlay, load_pitch_input, overlay_background,
-                         pitch_batch)
+from wtcli.pitch.inputs import is_photo, load_pitch_input, pitch_batch
+from wtcli.pitch.overlay import draw_pitch_overlay, overlay_background
+from wtcli.segment.defaults import CANDIDATE_FLOOR
 
 
 def _overlay_name(img: dict, k: int) -> str:
@@ -26,7 +27,8 @@ def register(app: typer.Typer) -> None:
         inputs: List[Path] = typer.Argument(
             ..., metavar="INPUT...",
             help="A contours JSON (from `contours`), an instances JSON (COCO, every image in it), "
-                 "or mask PNGs of one image (one binary PNG per instance, or a label PNG)."),
+                 "mask PNGs of one image (one binary PNG per instance, or a label PNG), or "
+                 "photos (segmented first with the shipped model)."),
         area_threshold: Optional[float] = typer.Option(
             None, "--area-threshold", min=0, metavar="PX",
             help="Eq. 6 threshold in pixels (default 20; a contours JSON keeps its own)."),
@@ -51,20 +53,34 @@ def register(app: typer.Typer) -> None:
         json_out: bool = typer.Option(False, "--json", help="Print the pitch JSON on stdout."),
     ) -> None:
         """Measure each blade's angle θ, its class and its direction φ hub -> tip (eq. 7)."""
-        loaded = load_pitch_input(inputs, area_threshold, candidate_floor)
-        if image is not None and len(loaded) != 1:
-            raise InputError(f"--image needs an input with one image, got {len(loaded)}")
-        if len(loaded) > 1 and err_console.is_terminal:
-            with make_progress(transient=True) as progress:
-                task = progress.add_task("pitch", total=len(loaded), status="")
-                batch = pitch_batch(loaded, blades or None, source=str(inputs[0]),
-                                    on_done=lambda k, err: progress.update(
-                                        task, advance=1, status="" if err is None else "failed"),
-                                    score_threshold=score_threshold,
+        paths = [Path(p) for p in inputs]
+        from wtcli.outputs import check_outputs
+        check_outputs(files=[out], folders=[overlay_dir])  # before the work, not after
+        photos = bool(paths) and all(is_photo(p) for p in paths)
+        if photos:  # segment -> contours -> pitch, photo by photo (wtcli.chain)
+            from wtcli.chain import pitch_photos
+
+            def run(on_done=None):
+                return pitch_photos(paths, blades or None, source=str(inputs[0]), on_done=on_done,
+                                    area_threshold=area_threshold, score_threshold=score_threshold,
                                     candidate_floor=candidate_floor)
+            n_images = len(paths)
         else:
-            batch = pitch_batch(loaded, blades or None, source=str(inputs[0]),
-                                score_threshold=score_threshold, candidate_floor=candidate_floor)
+            loaded = load_pitch_input(paths, area_threshold)
+
+            def run(on_done=None):
+                return pitch_batch(loaded, blades or None, source=str(inputs[0]), on_done=on_done,
+                                   score_threshold=score_threshold, candidate_floor=candidate_floor)
+            n_images = len(loaded)
+        if image is not None and n_images != 1:
+            raise InputError(f"--image needs an input with one image, got {n_images}")
+        if n_images > 1 and err_console.is_terminal:
+            with make_progress(transient=True) as progress:
+                task = progress.add_task("pitch", total=n_images, status="")
+                batch = run(lambda k, err: progress.update(
+                    task, advance=1, status="" if err is None else "failed"))
+        else:
+            batch = run()
         for res, inp in zip(batch.results, batch.inputs):
             if res is not None and res.admitted:
                 name = inp.image.get("file_name") or inp.image.get("id", "?")

@@ -8,6 +8,8 @@ from typing import Optional
 
 import typer
 
+from wtcli.segment.defaults import DEFAULT_MAX_SIZE, DEFAULT_SCORE_THRESHOLD
+
 
 def segment(
     path: Path = typer.Argument(..., metavar="IMAGE|FOLDER",
@@ -15,9 +17,9 @@ def segment(
     out: Path = typer.Option(Path("segment-out"), "--out", "-o",
                              help="Output folder (created): instances.json, report.json, "
                                   "instances/, background_removed/, overlay/."),
-    score_threshold: float = typer.Option(0.5, "--score-threshold", min=0.0, max=1.0,
-                                          help="Keep instances scoring at least this."),
-    max_size: int = typer.Option(1600, "--max-size", min=64,
+    score_threshold: float = typer.Option(DEFAULT_SCORE_THRESHOLD, "--score-threshold", min=0.0,
+                                          max=1.0, help="Keep instances scoring at least this."),
+    max_size: int = typer.Option(DEFAULT_MAX_SIZE, "--max-size", min=64,
                                  help="Downscale larger photos to this long side for inference; "
                                       "masks are scaled back to the photo's size."),
     zoom: bool = typer.Option(True, "--zoom/--no-zoom",
@@ -51,22 +53,21 @@ def segment(
     from wtcli.errors import InputError, PartialFailure
     from wtcli.jsonio import dumps
     from wtcli.segment.batch import find_images, segment_paths, write_batch_files
-    from wtcli.segment.infer import load_model, predict, second_look
+    from wtcli.segment.infer import load_model, segment_image
     from wtcli.segment.model import resolve_weights
-    from wtcli.segment.refine import load_refiner, refine_edges, resolve_refiner
+    from wtcli.segment.refine import load_refiner, resolve_refiner
 
-    if out.exists() and not out.is_dir():
-        raise InputError(f"{out}: exists and is not a folder; choose another --out")
+    from wtcli.outputs import writable_folder
+    writable_folder(out)  # a read-only or blocked --out fails now, not after the model ran
     _, files = find_images(path, recursive)  # errors (no such path, empty folder) before loading
     weights = resolve_weights(model)
     net = load_model(weights, device, precision)
-    edges = load_refiner(refiner, net.precision) if refine else None
+    if refine:
+        load_refiner(refiner, net.precision)  # a missing refiner is refused before any photo
 
-    def run(img):
-        inst = predict(net, img, score_threshold=score_threshold, max_size=max_size, flip=flip)
-        if zoom:
-            inst = second_look(net, img, inst, score_threshold, max_size, flip)
-        return refine_edges(edges, img, inst) if edges is not None else inst
+    def run(img):  # the segmenter alone: no low-score blades kept for pitch (candidate_floor)
+        return segment_image(img, net, score_threshold, max_size, candidate_floor=None, zoom=zoom,
+                             flip=flip, refine=refine, refiner=refiner)
 
     with count_bar("segment", len(files)) as advance:
         results = segment_paths(path, out, run, recursive=recursive, resume=resume,

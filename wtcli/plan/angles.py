@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from wtcli.errors import InputError, PerceptionError
+from wtcli.pitch.rotor import ROTOR_GAP_TOLERANCE_DEG
 from wtcli.plan.config import CameraPose, Mission
 from wtcli.plan.zone import azimuths_from_pitch
 
@@ -24,6 +25,8 @@ def _parse(arg: str, ids: set[str]) -> tuple[str | None, Path]:
         tid, _, path = arg.partition("=")
         if tid in ids:
             return tid, Path(path)
+        if not Path(arg).exists() and "/" not in tid:  # ID=FILE with an ID the YAML lacks
+            raise InputError(f"{arg}: no turbine {tid!r} in the turbines YAML (its ids: {', '.join(sorted(ids))})")
     return None, Path(arg)
 
 
@@ -48,7 +51,7 @@ def _pitch_results(path: Path, expected: int):
     if not path.exists():
         raise InputError(f"{path}: file not found")
     if path.suffix.lower() in PITCH_SUFFIXES:
-        from wtcli.pitch import read_pitch
+        from wtcli.pitch.result import read_pitch
 
         out = []
         for res, err, img in read_pitch(path):
@@ -58,27 +61,21 @@ def _pitch_results(path: Path, expected: int):
         if not out:
             raise InputError(f"{path}: no image in this pitch file")
         return out
-    from wtcli.pitch import pitch_from_instances
-    from wtcli.segment.batch import read_image
-    from wtcli.segment.infer import segment_image
+    from wtcli.chain import photo_to_pitch
 
-    image = read_image(path)
-    inst = segment_image(image)
-    h, w = image.shape[:2]
-    kw = {"image": {"file_name": path.name, "width": w, "height": h}, "source": str(path)}
     # One blade short is kept (blade_azimuths completes the rotor); any other count gets pitch's
     # own treatment: trimmed to the rotor's blades where that is clear, else refused.
-    kw["rotor_blades"] = expected  # what a low-score blade may complete the rotor to
-    res = pitch_from_instances(inst, expected_blades=None, **kw)
-    if len(res.blades) != expected and not (expected >= 3 and len(res.blades) == expected - 1):
-        res = pitch_from_instances(inst, expected_blades=expected, **kw)
+    found = photo_to_pitch(path, expected, one_short_ok=True)
+    if found.error is not None:
+        raise PerceptionError(found.error)
+    res = found.result
     return [(res, path.name)]
 
 
 # Rotor blades are evenly spaced; a measured gap further than this from 360/N means a merged,
 # split or missed blade (a wrong 3D blade would put the flight where no blade is, and a real
-# blade where the plan thinks there is free air).
-MAX_SPACING_ERROR_DEG = 25.0
+# blade where the plan thinks there is free air). The same tolerance as pitch's rotor checks.
+MAX_SPACING_ERROR_DEG = ROTOR_GAP_TOLERANCE_DEG
 
 
 def check_rotor_spacing(azimuths: list[float], where: str) -> None:

@@ -23,17 +23,16 @@ from torchvision.ops import boxes as box_ops
 
 from wtcli.errors import InputError
 from wtcli.masks import LABELS, Instances
-from wtcli.pitch import CANDIDATE_FLOOR
+from wtcli.segment.bgr import as_bgr
 from wtcli.segment.data import image_tensor
+from wtcli.segment.defaults import CANDIDATE_FLOOR, DEFAULT_MAX_SIZE, DEFAULT_SCORE_THRESHOLD
 from wtcli.segment.model import (backbone_in_bf16, build_model, load_weights, pick_device,
                                  resolve_precision, resolve_weights, set_infer_size)
 
-DEFAULT_MAX_SIZE = 1600
-DEFAULT_SCORE_THRESHOLD = 0.5
 MASK_OFFSET_PX = 0.5  # see paste_mask; weights trained with area-resized masks
 MIRROR_BOX_SHIFT_PX = 0.5  # see unmirror_boxes
 # Where each class's soft mask is cut. Blades at 0.45: on 200 development renders (seeds
-# 7 000 000 +, run 13) blade IoU 0.742 against 0.735 at 0.5 (0.737 at 0.4, 0.715 at 0.55): the
+# 7 000 000 +, an earlier model) blade IoU 0.742 against 0.735 at 0.5 (0.737 at 0.4, 0.715 at 0.55): the
 # soft edge of a blade a few pixels wide comes out a little below 0.5. Tower and nacelle peak
 # at 0.5.
 MASK_THRESHOLD = {"blade": 0.45, "tower": 0.5, "nacelle": 0.5}
@@ -44,7 +43,7 @@ SMALL_TURBINE = 0.5
 ZOOM_PAD = 0.6
 # ... but the crop is at least ZOOM_MIN_CROP of the frame's height: a turbine a few dozen pixels
 # tall, magnified 5-10x to the network's size, is blurrier than anything it was trained on, and
-# its faint blades were missed. On 100 development renders (session 26, refined) blade IoU /
+# its faint blades were missed. On 100 development renders (an earlier model, refined) blade IoU /
 # AP50 with no floor, 0.3, 0.45, 0.6, 0.7, 0.76 of the frame: 0.836 / 0.762, 0.837 / 0.776,
 # 0.840 / 0.780, 0.844 / 0.798, 0.845 / 0.789, 0.846 / 0.789 (a floor of 0.85 with crops allowed
 # up to 0.9: 0.847 / 0.768, nacelle IoU 0.826 -> 0.819); the 38 real photos' blade IoU 0.753 ->
@@ -91,8 +90,8 @@ def predict(model: torch.nn.Module, image_bgr: np.ndarray, score_threshold: floa
     """Instances (labels, masks at the image's size, scores, boxes xyxy) with score >= threshold.
 
     ``flip``: detect the photo and its mirror image together (``_detect_both``); about 2 x
-    the time. On 300 development renders (run 14, second look) blade / tower / nacelle IoU
-    0.757 / 0.855 / 0.768 without -> 0.774 / 0.867 / 0.778 with."""
+    the time. On 300 development renders (an earlier model, second look) blade / tower /
+    nacelle IoU 0.757 / 0.855 / 0.768 without -> 0.774 / 0.867 / 0.778 with."""
     img = as_bgr(image_bgr)
     if not 0.0 <= score_threshold <= 1.0:
         raise InputError(f"expected a score threshold in [0, 1], got {score_threshold}")
@@ -125,18 +124,6 @@ def predict(model: torch.nn.Module, image_bgr: np.ndarray, score_threshold: floa
     boxes[:, [0, 2]] = boxes[:, [0, 2]].clip(0, W)
     boxes[:, [1, 3]] = boxes[:, [1, 3]].clip(0, H)
     return drop_duplicate_blades(Instances(names, masks, scores[keep].clip(0, 1), boxes))
-
-
-def as_bgr(image: np.ndarray) -> np.ndarray:
-    """A uint8 photo as BGR [H, W, 3]: grey and BGRA converted, anything else refused."""
-    img = np.asarray(image)
-    if img.ndim == 2:
-        img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
-    if img.ndim != 3 or img.shape[2] not in (3, 4) or img.dtype != np.uint8:
-        raise InputError(f"expected a BGR uint8 image [H, W, 3], got {img.dtype} {img.shape}")
-    if img.shape[2] == 4:
-        img = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
-    return img
 
 
 def drop_duplicate_blades(inst: Instances, inside: float = DUPLICATE_INSIDE) -> Instances:
@@ -202,7 +189,7 @@ def mirror_boxes(boxes: torch.Tensor, width: int) -> torch.Tensor:
 def unmirror_boxes(boxes: torch.Tensor, width: int) -> torch.Tensor:
     """Boxes (..., 4) the box head found in the mirrored ``width``-wide tensor, in the photo's
     frame: mirrored back and moved half a pixel left. Measured: the box head regressing from
-    the true boxes of 40 development renders (run 14) reads them 0.46 px right of the truth
+    the true boxes of 40 development renders (an earlier model) reads them 0.46 px right of the truth
     (median) in the mirrored pass with the plain mirror, 0.0 in the plain pass."""
     out = boxes.clone()
     out[..., 0] = width - MIRROR_BOX_SHIFT_PX - boxes[..., 2]
@@ -219,7 +206,7 @@ def _detect_both(model, images, feats: dict) -> dict:
 
     A detection one pass scores low is kept when the other scores it well, and the two passes'
     pixel jitter on thin blades partly cancels. On 300 development renders
-    (run 14, second look) blade / tower / nacelle IoU 0.767 / 0.862 / 0.779 with the masks
+    (an earlier model, second look) blade / tower / nacelle IoU 0.767 / 0.862 / 0.779 with the masks
     alone averaged -> 0.774 / 0.867 / 0.778; on the real photos blade 0.707 -> 0.719."""
     rh = model.roi_heads
     T = images.tensors.flip(-1)
@@ -388,8 +375,8 @@ def segment_image(image_bgr: np.ndarray, model: torch.nn.Module | None = None,
 
     Returns the instances scoring at least ``score_threshold`` AND the blades scoring at least
     ``candidate_floor`` (default 0.2; None: none): those are rotor-completion candidates for
-    ``wtcli.pitch.pitch_from_instances``, which counts only what scores ``score_threshold``
-    (give it the same one). ``inst[inst.scores >= score_threshold]`` is the segmentation alone;
+    ``wtcli.pitch.measure_pitch`` (``wtcli.chain.photo_to_pitch``), which counts only what
+    scores ``score_threshold`` (give it the same one). ``inst[inst.scores >= score_threshold]`` is the segmentation alone;
     without ``zoom`` it is the same as predicting at that threshold (duplicates are dropped
     greedily by score). ``zoom``: small turbines get a ``second_look`` (at the lower threshold,
     as ``segment --score-threshold 0.2`` does, so files chain to the same result). ``flip``: as
@@ -434,15 +421,3 @@ def overlay(image_bgr: np.ndarray, inst: Instances, alpha: float = 0.45) -> np.n
         cv2.putText(out, f"{label} {inst.scores[i]:.2f}", (x0 + 2, max(12, y0 + 12)),
                     cv2.FONT_HERSHEY_SIMPLEX, 0.4 * thick, COLORS[label], thick, cv2.LINE_AA)
     return out
-
-
-def segment_photo(path: str | Path, **kw) -> tuple[dict, Instances]:
-    """Read a photo file and segment it: (image record {file_name, path, width, height},
-    instances). Keywords go to ``segment_image``. An unreadable file is an InputError."""
-    from wtcli.segment.batch import read_image
-
-    path = Path(path)
-    img = read_image(path)
-    rec = {"id": 1, "file_name": path.name, "path": str(path), "width": int(img.shape[1]),
-           "height": int(img.shape[0])}
-    return rec, segment_image(img, **kw)

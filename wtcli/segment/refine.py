@@ -218,7 +218,7 @@ def refine_edges(refiner: Refiner, image_bgr: np.ndarray, inst: Instances, add_a
     ``add_at``, stays above ``keep_at``: one value, or one per class, default ``KEEP_AT``); a
     mask the refinement would empty keeps its own. A photo longer than ``max_size`` is refined
     at that size and the masks scaled back."""
-    from wtcli.segment.infer import as_bgr
+    from wtcli.segment.bgr import as_bgr
 
     keep_at = KEEP_AT if keep_at is None else keep_at
     if not len(inst):

@@ -1,0 +1,101 @@
+"""Where a rotor's hub is in the image: the nacelle/hub instance's pixels near the blades'
+convergence point if there is a nacelle, else the convergence point (least-squares intersection
+of the blade axes), else the blades' common end, else (one blade alone) the blade's wider end
+(blades taper to the tip).
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from wtcli.contours import ContourSet, InstanceContours
+from wtcli.pitch.angles import Axis
+
+
+def axes_convergence(axes: list[Axis], lengths: list[float]) -> np.ndarray | None:
+    """Least-squares intersection of the blade axes (weighted by length); None if the axes are
+    (nearly) parallel or the point is far from the blades' ends."""
+    if len(axes) < 2:
+        return None
+    A = np.zeros((2, 2))
+    b = np.zeros(2)
+    for ax, w in zip(axes, lengths):
+        u = ax.direction
+        P = np.eye(2) - np.outer(u, u)
+        A += w * P
+        b += w * P @ np.asarray(ax.centroid)
+    ev = np.linalg.eigvalsh(A)
+    if ev[0] <= 0.01 * ev[1]:
+        return None
+    hub = np.linalg.solve(A, b)
+    # It must be near one end of most blades (not far beyond them): ratio to blade length.
+    near = [min(abs(ax.t_min - (hub - ax.centroid) @ ax.direction),
+                abs(ax.t_max - (hub - ax.centroid) @ ax.direction)) / max(L, 1e-9)
+            for ax, L in zip(axes, lengths)]
+    if float(np.median(near)) > 0.5:
+        return None
+    return hub
+
+
+def common_end(axes: list[Axis]) -> np.ndarray:
+    """The blades' common end: for each blade the end closest to any other blade's ends."""
+    ends = [(ax.point(ax.t_min), ax.point(ax.t_max)) for ax in axes]
+    chosen = []
+    for i, (a, b) in enumerate(ends):
+        others = [p for j, e in enumerate(ends) if j != i for p in e]
+        da = min(np.linalg.norm(a - p) for p in others)
+        db = min(np.linalg.norm(b - p) for p in others)
+        chosen.append(a if da <= db else b)
+    return np.mean(chosen, axis=0)
+
+
+def wider_end(inst: InstanceContours, ax: Axis, decisive: bool = False) -> np.ndarray | None:
+    """One blade alone: the end whose last quarter holds more pixels (root wider than tip).
+    With ``decisive``, None unless one quarter holds at least 15 % more than the other and is
+    at least a pixel wider on average (a thin blade's ends differ by pixel noise alone)."""
+    region = inst.fill()
+    x0, y0, _, _ = inst.bbox
+    ys, xs = np.nonzero(region)
+    u = ax.direction
+    t = (xs + x0 - ax.centroid[0]) * u[0] + (ys + y0 - ax.centroid[1]) * u[1]
+    q = 0.25 * (ax.t_max - ax.t_min)
+    n_low = int((t < ax.t_min + q).sum())
+    n_high = int((t > ax.t_max - q).sum())
+    if decisive and (max(n_low, n_high) < 1.15 * min(n_low, n_high)
+                     or abs(n_high - n_low) < max(q, 1.0)):
+        return None
+    return ax.point(ax.t_min if n_low >= n_high else ax.t_max)
+
+
+def nacelle_hub(nacelles: ContourSet, near: np.ndarray | None, scale: float) -> np.ndarray | None:
+    """Centroid of the nacelle/hub pixels near ``near`` (where the blade axes meet): those
+    within the region's equivalent radius of it. None without ``near``, or when no nacelle
+    comes within ``0.25 * scale`` (the blades' median length) of it — a far turbine's
+    nacelle must not turn this rotor's blades around."""
+    if len(nacelles) == 0 or near is None:
+        return None
+    best, best_d = None, math.inf
+    for inst in nacelles:
+        region = inst.fill()
+        x0, y0, _, _ = inst.bbox
+        ys, xs = np.nonzero(region)
+        pts = np.stack([xs + x0, ys + y0], 1).astype(float)
+        dist = np.linalg.norm(pts - near, axis=1)
+        d = float(dist.min())
+        rho = math.sqrt(len(pts) / math.pi)  # the region's equivalent radius
+        if d < best_d:
+            best, best_d = pts[dist <= max(rho, d + 1.0)].mean(axis=0), d
+    if best is None or np.linalg.norm(best - near) > 0.25 * scale + 3.0:
+        return None
+    return best
+
+
+def region_centroid(inst: InstanceContours) -> np.ndarray:
+    m = cv2.moments(inst.fill().astype(np.uint8), binaryImage=True)
+    x0, y0, _, _ = inst.bbox
+    if m["m00"] <= 0:
+        return np.asarray(inst.points.mean(axis=0), float)
+    return np.array([m["m10"] / m["m00"] + x0, m["m01"] / m["m00"] + y0])

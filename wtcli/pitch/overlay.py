@@ -1,0 +1,119 @@
+"""The pitch overlay: each blade's contour, eq. 7 rectangle, axis (arrow hub -> tip), θ, class
+and φ drawn on the photo or on the masks.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from wtcli.errors import InputError
+from wtcli.pitch.angles import ACUTE, CLASS_INTERVALS, CLASSES, HORIZONTAL, VERTICAL
+from wtcli.pitch.inputs import PitchInput
+from wtcli.pitch.result import PitchResult
+
+
+CLASS_COLORS_BGR = {HORIZONTAL: (80, 200, 40), ACUTE: (0, 165, 255), VERTICAL: (230, 60, 230)}
+_PART_GREY = {"blade": 90, "tower": 55, "nacelle": 120}
+
+
+def mask_canvas(result: PitchResult) -> np.ndarray:
+    """A black BGR canvas with every instance's region in grey (when there is no photo)."""
+    h, w = result.image_size
+    canvas = np.zeros((h, w, 3), np.uint8)
+    if result.contours is not None:
+        for inst in result.contours:
+            g = _PART_GREY.get(inst.label, 80)
+            cv2.drawContours(canvas, [c.reshape(-1, 1, 2) for c in inst.contours], -1,
+                             (g, g, g), thickness=cv2.FILLED)
+    return canvas
+
+
+def _text(img: np.ndarray, s: str, org: tuple[int, int], scale: float, color, thick: int) -> None:
+    for dx, dy in ((-1, -1), (-1, 1), (1, -1), (1, 1)):  # a dark outline, same glyph widths
+        cv2.putText(img, s, (org[0] + dx, org[1] + dy), cv2.FONT_HERSHEY_SIMPLEX, scale,
+                    (0, 0, 0), thick, cv2.LINE_AA)
+    cv2.putText(img, s, org, cv2.FONT_HERSHEY_SIMPLEX, scale, color, thick, cv2.LINE_AA)
+
+
+def draw_pitch_overlay(image_bgr: np.ndarray | None, result: PitchResult) -> np.ndarray:
+    """Each blade's contour, eq. 7 rectangle, axis (arrow hub -> tip), θ, class and φ on a copy
+    of the image (BGR, same size as the masks), or on ``mask_canvas`` when ``image_bgr`` is None."""
+    h, w = result.image_size
+    if image_bgr is None:
+        img = mask_canvas(result)
+    else:
+        img = np.ascontiguousarray(image_bgr[:, :, :3] if image_bgr.ndim == 3
+                                   else cv2.cvtColor(image_bgr, cv2.COLOR_GRAY2BGR)).copy()
+        if img.shape[:2] != (h, w):
+            raise ValueError(f"expected an image of {w}x{h}, got {img.shape[1]}x{img.shape[0]}")
+    s = max(h, w) / 1000.0
+    thick = max(1, round(2 * s))
+    scale = max(0.45, 0.6 * s)
+    blades_contours = {}
+    if result.contours is not None:
+        blades_contours = {i.source_index: i for i in result.contours.of("blade")}
+    for k, b in enumerate(result.blades):
+        color = CLASS_COLORS_BGR[b.theta_class]
+        inst = blades_contours.get(b.source_index)
+        if inst is not None:
+            cv2.drawContours(img, [c.reshape(-1, 1, 2) for c in inst.contours], -1, color,
+                             max(1, thick // 2), cv2.LINE_AA)
+        if b.rect.corners is not None:
+            cv2.polylines(img, [np.round(b.rect.corners).astype(np.int32).reshape(-1, 1, 2)],
+                          True, (200, 200, 200), 1, cv2.LINE_AA)
+        root = tuple(int(round(v)) for v in b.root_px)
+        tip = tuple(int(round(v)) for v in b.tip_px)
+        length = max(1.0, math.dist(root, tip))
+        cv2.arrowedLine(img, root, tip, color, thick + 1, cv2.LINE_AA,
+                        tipLength=min(0.2, 30 * s / length))
+        # "#k" just beyond the tip; the numbers go in the table at the top left.
+        tag = f"#{k + 1}"
+        (tw, th), _ = cv2.getTextSize(tag, cv2.FONT_HERSHEY_SIMPLEX, scale, thick)
+        along = (np.asarray(b.tip_px) - np.asarray(b.root_px)) / length
+        anchor = np.asarray(b.tip_px) + along * (8 + tw) * max(s, 0.7)
+        x = int(np.clip(anchor[0] - tw / 2, 2, max(2, w - tw - 2)))
+        y = int(np.clip(anchor[1] + th / 2, th + 2, h - 4))
+        _text(img, tag, (x, y), scale, color, thick)
+    hub = tuple(int(round(v)) for v in result.hub_px)
+    cv2.circle(img, hub, max(3, round(6 * s)), (40, 40, 255), -1, cv2.LINE_AA)
+    cv2.circle(img, hub, max(3, round(6 * s)), (255, 255, 255), 1, cv2.LINE_AA)
+    step = int(24 * max(s, 0.7))
+    for k, b in enumerate(result.blades):
+        _text(img, f"#{k + 1}  theta {b.theta_deg:5.1f}  {b.theta_class:<10}  phi {b.phi_deg:5.1f}"
+                   f"  (eq. 7: {b.theta_eq7_deg:5.1f})"
+                   + (f"  admitted, score {b.score:.2f}" if b.admitted_low_score else ""),
+              (8, step * (k + 1)), scale,
+              CLASS_COLORS_BGR[b.theta_class], thick)
+    # Legend: the classes and the angle convention.
+    step = int(24 * max(s, 0.7))
+    y = h - 4 * step + step // 2
+    for name in CLASSES:
+        _text(img, f"{name} {CLASS_INTERVALS[name]}", (8, y), scale, CLASS_COLORS_BGR[name], thick)
+        y += step
+    _text(img, "angles CCW from right, y up", (8, y), scale, (255, 255, 255), thick)
+    return img
+
+
+def overlay_background(inp: PitchInput, explicit: Path | None) -> tuple[np.ndarray | None, str]:
+    """The photo to draw on: ``explicit`` (must load and match the masks' size) or the first
+    candidate that exists and matches; else None (black canvas). Returns (image, note)."""
+    h, w = inp.contours.image_size if inp.contours is not None else (0, 0)
+    if explicit is not None:
+        img = cv2.imread(str(explicit), cv2.IMREAD_COLOR)
+        if img is None:
+            raise InputError(f"{explicit}: cannot read the image for the overlay")
+        if img.shape[:2] != (h, w):
+            raise InputError(f"{explicit}: {img.shape[1]}x{img.shape[0]} does not match the "
+                             f"masks ({w}x{h})")
+        return img, ""
+    for p in inp.background_candidates:
+        if p.is_file():
+            img = cv2.imread(str(p), cv2.IMREAD_COLOR)
+            if img is not None and img.shape[:2] == (h, w):
+                return img, ""
+            return None, f"{p}: unreadable or not {w}x{h}; overlay drawn on the masks"
+    return None, ""
