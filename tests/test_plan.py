@@ -89,7 +89,7 @@ def test_oblique_photo_back_projection_matches_ground_truth():
 
 
 def test_azimuths_from_pitch_result_of_rendered_masks():
-    from wtcli.geometry.render import instance_masks
+    from wtcli.geometry.projection import instance_masks
     from wtcli.masks import Instances
     from wtcli.pitch import pitch_from_instances
 
@@ -552,7 +552,7 @@ def test_cli_json_is_one_document(cli):
 
 def _pitch_image(t, cam=None):
     """A pitch-JSON image record of turbine ``t`` photographed from S_p (ground-truth masks)."""
-    from wtcli.geometry.render import instance_masks
+    from wtcli.geometry.projection import instance_masks
     from wtcli.masks import Instances
     from wtcli.pitch import pitch_from_instances
 
@@ -716,7 +716,7 @@ def test_cli_photo_with_a_blade_missed_by_the_segmenter_still_plans(cli, tmp_pat
     for the rotor completion; the segmenter is stood in for by the true masks less one blade."""
     import cv2
 
-    from wtcli.geometry.render import instance_masks
+    from wtcli.geometry.projection import instance_masks
     from wtcli.masks import Instances
     from wtcli.segment import infer
 
@@ -808,7 +808,7 @@ def test_cli_photo_with_a_low_score_blade_admits_it_and_says_so(cli, tmp_path, m
     admits it inside plan's photo path, the console names it, and the azimuths are the truth."""
     import cv2
 
-    from wtcli.geometry.render import instance_masks
+    from wtcli.geometry.projection import instance_masks
     from wtcli.masks import Instances
     from wtcli.segment import infer
 
@@ -1182,3 +1182,41 @@ def test_random_sites_plan_or_refuse_in_one_line_safely(seed):
         return
     assert not r["clearance_violation"] and not r["battery_overrun"]
     assert r["min_side_fine"] >= r["min_side_coverage"]
+
+
+# ---- site sanity -----------------------------------------------------------------------------------
+def _site(*turbines, **top):
+    base = {"id": "T1", "position": [0, 0, 0], "hub_height_m": 80, "rotor_diameter_m": 90,
+            "yaw_deg": 0}
+    return {"turbines": [{**base, **t} for t in turbines], **top}
+
+
+@pytest.mark.parametrize("entry,key", [
+    ({"position": [1e12, 1e12, 0]}, r"turbines\[0\]\.position: expected a point within 50 km"),
+    ({"position": [0, 0, 2e4]}, r"turbines\[0\]\.position: expected a point within 50 km"),
+    ({"blade_azimuths_deg": [90, 90, 210]}, r"turbines\[0\]\.blade_azimuths_deg: expected blades spread like a rotor"),
+])
+def test_absurd_turbine_is_refused_naming_the_key(entry, key):
+    with pytest.raises(ConfigError, match=key):
+        mission_from_dict(_site(entry))
+
+
+def test_far_lat_lon_is_refused_naming_it():
+    d = _site({"position": None, "lat": 10.0, "lon": 10.0}, site={"origin": {"lat": 53.5, "lon": 10.0}})
+    with pytest.raises(ConfigError, match=r"turbines\[0\]\.lat/lon: expected a point within 50 km"):
+        mission_from_dict(d)
+
+
+def test_turbines_on_top_of_each_other_are_refused_naming_both():
+    with pytest.raises(ConfigError, match=r"turbines\[1\]\.position: turbine 'T2' stands 0\.0 m from 'T1'"):
+        mission_from_dict(_site({}, {"id": "T2"}))
+    with pytest.raises(ConfigError, match=r"turbines\[2\]\.position: turbine 'T3' stands 60\.0 m from 'T2'"):
+        mission_from_dict(_site({}, {"id": "T2", "position": [300, 0, 0]},
+                                {"id": "T3", "position": [360, 0, 0]}))
+    m = mission_from_dict(_site({}, {"id": "T2", "position": [91, 0, 0]}))  # rotors just apart
+    assert len(m.turbines) == 2
+
+
+def test_a_rotor_a_little_uneven_is_accepted():
+    m = mission_from_dict(_site({"blade_azimuths_deg": [90, 215, 330]}))
+    assert m.turbines[0].azimuths_deg == (90.0, 215.0, 330.0)

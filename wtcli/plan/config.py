@@ -55,6 +55,11 @@ TURBINE_KEYS = ("id", "position", "lat", "lon", "alt", "hub_height_m", "rotor_di
 TOWER_KEYS = ("base_radius_m", "top_radius_m")
 NACELLE_KEYS = ("length_m", "width_m", "height_m")
 POSE_KEYS = ("position", "look_at", "roll_deg")
+# Where a point of a site may be, in ENU metres from the site origin: a real site is a few km
+# across (and exports are checked for sites of 10 km); beyond, a position is a typo or in
+# the wrong unit (a 1e12 once planned and exported a home altitude of 1.4e12 m).
+SITE_REACH_M = 50_000.0
+SITE_Z_M = (-1000.0, 9000.0)
 
 
 @dataclass(frozen=True)
@@ -215,7 +220,7 @@ def _point(m: dict, where: str, origin: dict | None, what: str) -> tuple[float, 
     if "position" in m and m["position"] is not None:
         if any(k in m for k in ("lat", "lon")):
             raise ConfigError(f"{where}: give either position or lat/lon/alt for the {what}, not both")
-        return tuple(vector(m, "position", where, 3))
+        return _on_site(tuple(vector(m, "position", where, 3)), f"{where}.position")
     if "lat" in m or "lon" in m:
         if origin is None:
             raise ConfigError(f"{where}: lat/lon needs site.origin (lat, lon, alt) to convert to "
@@ -224,9 +229,59 @@ def _point(m: dict, where: str, origin: dict | None, what: str) -> tuple[float, 
         lon = number(m, "lon", where, -180, 180)
         alt = number(m, "alt", where, -500, 9000, default=float(origin["alt"]))
         e = geodetic_to_enu(lat, lon, alt, origin)
-        return (float(e[0]), float(e[1]), float(e[2]))
+        return _on_site((float(e[0]), float(e[1]), float(e[2])), f"{where}.lat/lon")
     raise ConfigError(f"{where}: missing the {what}: give position: [x, y, z] (ENU m) or "
                       "lat/lon/alt")
+
+
+def _on_site(p: tuple[float, float, float], where: str) -> tuple[float, float, float]:
+    """The point, if it lies within ``SITE_REACH_M`` of the site origin and ``SITE_Z_M``."""
+    if max(abs(p[0]), abs(p[1])) > SITE_REACH_M or not SITE_Z_M[0] <= p[2] <= SITE_Z_M[1]:
+        raise ConfigError(f"{where}: expected a point within {SITE_REACH_M / 1000:g} km of the "
+                          f"site origin (ENU x, y in [-{SITE_REACH_M:g}, {SITE_REACH_M:g}] m, z in "
+                          f"[{SITE_Z_M[0]:g}, {SITE_Z_M[1]:g}] m), got "
+                          f"[{', '.join(f'{v:.6g}' for v in p)}]")
+    return p
+
+
+def _spread_like_a_rotor(azimuths: tuple[float, ...], where: str) -> None:
+    """Blades of a rotor are evenly spaced: each gap between neighbours within the tolerance the
+    photo path allows (``plan.angles.MAX_SPACING_ERROR_DEG``) of 360/n, else a typo such as
+    [90, 90, 210]."""
+    from wtcli.plan.angles import MAX_SPACING_ERROR_DEG
+
+    n = len(azimuths)
+    if n < 2:
+        return
+    a = np.sort(np.asarray(azimuths, float) % 360.0)
+    gaps = np.diff(np.r_[a, a[0] + 360.0])
+    if np.abs(gaps - 360.0 / n).max() > MAX_SPACING_ERROR_DEG:
+        raise ConfigError(f"{where}.blade_azimuths_deg: expected blades spread like a rotor (gaps "
+                          f"of {360.0 / n:g} +- {MAX_SPACING_ERROR_DEG:g} deg between neighbours), "
+                          f"got {[round(float(x), 3) for x in azimuths]} (gaps "
+                          f"{[round(float(g), 1) for g in gaps]})")
+
+
+def _apart(turbines: list[Turbine], where: str) -> None:
+    """Two turbines whose towers stand closer than their two rotor radii would strike each
+    other's blades: a duplicate entry or a wrong position, refused naming both."""
+    if len(turbines) < 2:
+        return
+    xy = np.array([t.base[:2] for t in turbines])
+    r = np.array([t.tip_radius for t in turbines])
+    order = np.argsort(xy[:, 0], kind="stable")
+    reach = 2 * float(r.max())
+    for a_i, i in enumerate(order):  # sweep along x: only neighbours within two rotor radii
+        for j in order[a_i + 1:]:
+            if xy[j, 0] - xy[i, 0] > reach:
+                break
+            d = float(np.linalg.norm(xy[i] - xy[j]))
+            if d < r[i] + r[j]:
+                a, b = sorted((int(i), int(j)))
+                raise ConfigError(
+                    f"{where}: turbines[{b}].position: turbine {turbines[b].id!r} stands "
+                    f"{d:.1f} m from {turbines[a].id!r}, closer than their rotor radii allow "
+                    f"({r[a]:g} + {r[b]:g} m): a duplicate entry or a wrong position")
 
 
 def mission_from_dict(d: Any, where: str = "turbines.yaml", base_dir: str | Path = ".") -> Mission:
@@ -326,6 +381,7 @@ def mission_from_dict(d: Any, where: str = "turbines.yaml", base_dir: str | Path
         seen.add(t.id)
         turbines.append(t)
         extras[t.id] = ex
+    _apart(turbines, where)
     return Mission(tuple(turbines), camera, fleet, settings, origin, extras)
 
 
@@ -374,6 +430,7 @@ def _turbine(td: Any, w: str, origin: dict | None, base_dir: Path) -> tuple[Turb
                               f"[0, 360), got {az!r}")
         azimuths = tuple(number({"a": a}, "a", f"{w}.blade_azimuths_deg[{k}]", 0, 360)
                          for k, a in enumerate(az))
+        _spread_like_a_rotor(azimuths, w)
         source = "yaml"
     else:
         a1 = number(td, "rotor_azimuth_deg", w, 0, 360, default=None)
