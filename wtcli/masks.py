@@ -118,7 +118,7 @@ def check_pixels(h: int, w: int, where: str) -> None:
     """Refuse an image larger than MAX_IMAGE_PIXELS before anything is allocated for it."""
     if h * w > MAX_IMAGE_PIXELS:
         raise ValueError(f"{where}: {w}x{h} is {h * w:,} pixels, over the limit of "
-                         f"{MAX_IMAGE_PIXELS:,} (docs/contours.md)")
+                         f"{MAX_IMAGE_PIXELS:,} (docs/exit-codes.md)")
 
 
 def mask_box(mask: np.ndarray) -> np.ndarray:
