@@ -580,6 +580,8 @@ def test_cli_pitch_json_input_sets_azimuths(cli, tmp_path):
     got = sorted(read_plan(out).turbine("T2").azimuths_deg)
     for g, w in zip(got, sorted(t.azimuths_deg)):
         assert abs((g - w + 180) % 360 - 180) < 2.0
+    sources = {tid: z["azimuth_source"] for tid, z in read_plan(out).summary["turbines"].items()}
+    assert sources == {"T1": "yaml", "T2": "photo"}  # was "yaml" for the photo's turbine too
 
     def rotated(deg):
         return dataclasses.replace(t, azimuths_deg=tuple(a + deg for a in t.azimuths_deg))

@@ -150,7 +150,9 @@ class TurbineExtras:
     photo: Path | None = None  # photo (or pitch JSON) of this turbine, taken from camera_pose
     measured_tips: np.ndarray | None = None  # (N, 3) ENU m: the paper's eq. 2 input
     camera_pose: CameraPose | None = None  # default: at S_p looking at the zone centre
-    azimuth_source: str = "default"  # yaml | tips | default (evenly spaced, blade 1 up)
+    # photo (a photo or pitch JSON, plan_mission's azimuths) | yaml | tips | default (evenly
+    # spaced, blade 1 up)
+    azimuth_source: str = "default"
 
 
 @dataclass(frozen=True)
@@ -182,8 +184,9 @@ class Mission:
                 return t
         raise KeyError(turbine_id)
 
-    def with_azimuths(self, azimuths: dict[str, list[float]]) -> Mission:
-        """The same mission with some turbines' blade azimuths replaced."""
+    def with_azimuths(self, azimuths: dict[str, list[float]], source: str = "photo") -> Mission:
+        """The same mission with some turbines' blade azimuths replaced, ``source`` recorded as
+        where they came from (``TurbineExtras.azimuth_source``)."""
         ts = []
         for t in self.turbines:
             if t.id in azimuths:
@@ -192,7 +195,9 @@ class Mission:
                     raise ValueError(f"turbine {t.id!r}: expected {t.n_blades} azimuths, got {len(az)}")
                 t = replace(t, azimuths_deg=az)
             ts.append(t)
-        return replace(self, turbines=tuple(ts))
+        extras = {**self.extras, **{tid: replace(self.extra(tid), azimuth_source=source)
+                                    for tid in azimuths}}
+        return replace(self, turbines=tuple(ts), extras=extras)
 
 
 # ---- loading -----------------------------------------------------------------------------------

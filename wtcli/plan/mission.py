@@ -512,10 +512,12 @@ STAGES = ("turbines", "legs", "routes", "coverage")
 def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = None,
                  pattern: str = "adaptive", enforce_safety: bool | None = None,
                  workers: int | None = None,
-                 progress: StageProgress | None = None) -> Plan:
+                 progress: StageProgress | None = None, azimuth_source: str = "photo") -> Plan:
     """Plan every turbine of ``mission`` for its fleet; see the module docstring.
 
-    azimuths: turbine id -> blade rotor azimuths (deg), overriding the YAML.
+    azimuths: turbine id -> blade rotor azimuths (deg), overriding the YAML; ``azimuth_source``
+    names where they came from in ``summary.turbines.<id>.azimuth_source`` ("photo": the
+    command line's photos and pitch JSON).
     enforce_safety: raise PlanError on any clearance/ground violation or coverage shortfall
     (default: True for "adaptive", False for the "fixed-y" baseline, which reports them).
     workers: processes for the per-turbine work, the legs between turbines and the routes
@@ -532,7 +534,7 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
         if unknown:
             raise ConfigError(f"azimuths given for unknown turbine(s) {sorted(unknown)}")
         try:
-            mission = mission.with_azimuths(azimuths)
+            mission = mission.with_azimuths(azimuths, azimuth_source)
         except ValueError as e:
             raise ConfigError(str(e)) from None
     s, fl = mission.settings, mission.fleet
