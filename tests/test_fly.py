@@ -15,7 +15,7 @@ import pytest
 from wtcli.errors import ConfigError, SimulationError
 from wtcli.fly.flight import fly_plan, path_deviation, turbine_clearance
 from wtcli.fly.scenario import default_scenario, load_scenario, shipped_scenarios
-from wtcli.fly.sim import fly, make_reference
+from wtcli.fly.sim import fly, make_controller, make_reference
 from wtcli.fly.wind import dryden_params, dryden_series, gust_series, make_wind
 from wtcli.geometry import Camera, Turbine
 from wtcli.plan_file import Plan, Route, write_plan
@@ -233,8 +233,8 @@ def test_non_finite_state_fails_loudly_not_nan():
     extra[1000:] = np.nan
     from dataclasses import replace
     with pytest.raises(SimulationError, match="diverged"):
-        fly(ref, scn, replace(wind, extra=extra), np.zeros(len(ref.t)), "pid",
-            np.random.default_rng(0))
+        fly(ref, scn, replace(wind, extra=extra), np.zeros(len(ref.t)),
+            make_controller("pid", ref, scn), np.random.default_rng(0))
 
 
 def test_manual_pilot_is_slower_and_less_precise():

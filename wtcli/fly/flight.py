@@ -20,7 +20,7 @@ import numpy as np
 from wtcli.console import StageProgress, stage_ticker
 from wtcli.fly.pilot import manual_route, ou_series, pilot_inputs
 from wtcli.fly.scenario import Scenario
-from wtcli.fly.sim import G, Reference, Track, fly, make_reference
+from wtcli.fly.sim import G, Reference, Track, fly, make_controller, make_reference
 from wtcli.fly.terrain import Ground
 from wtcli.fly.wind import make_wind
 from wtcli.geometry import Camera, Turbine
@@ -205,7 +205,8 @@ def fly_route(route: Route, scn: Scenario, ground: Ground, uav_index: int, mode:
     prng = _rng(scn, uav_index, _PILOT)
     if mode == "pilot":
         pilot = pilot_inputs(scn.manual_pilot, n, dt, prng)
-    track = fly(ref, scn, wind, g_ref, mode, _rng(scn, uav_index, _SENSOR), pilot)
+    track = fly(ref, scn, wind, g_ref, make_controller(mode, ref, scn, pilot),
+                _rng(scn, uav_index, _SENSOR))
 
     steps = ref.reach_step(np.nonzero(flown.photo)[0])  # photos when the set-point gets there
     yaw = track.yaw_deg[steps].copy()

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from wtcli.fly.scenario import ManualPilot
-from wtcli.fly.sim import PilotInputs
+from wtcli.fly.control import PilotInputs
 from wtcli.fly.wind import shaped_noise
 from wtcli.plan_file import Route
 

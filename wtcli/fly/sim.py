@@ -7,15 +7,11 @@ maximum tilt (horizontal, g tan(tilt)) and the vertical acceleration limit. The 
 ``D(w - v) = c (w - v) + k |w - v| (w - v)`` (rotor drag plus body drag), so
 ``dv/dt = T + D(w - v)``: in still air the vehicle gets what it asked for, in wind it is pushed.
 
-Controllers (all output the velocity command ``v_cmd``, limited by the speed and climb limits):
-
-- ``pid``: eq. 10 per axis on the position error e = r - p: ``u = Kp e + Ki int(e) + Kd de/dt``,
-  with de/dt = v_ref - v_f (derivative on the filtered measured velocity, reference velocity as
-  feed-forward, so set-point steps cause no derivative kick), integral clamped and frozen while
-  the command saturates (anti-windup); ``v_cmd = v_ref + u``.
-- ``feedforward``: ``v_cmd = v_ref`` - the plan flown open-loop, with no wind compensation.
-- ``pilot``: a manual pilot (``wtcli.fly.pilot``): sees a delayed, misjudged position and
-  corrects with a stick gain, a deadband and noise, on top of flying the route's velocity.
+Controllers (``wtcli.fly.control``: PID, feed-forward only, manual pilot) are objects with
+``reset()`` and ``step()``; each returns the velocity command ``v_cmd``, already limited by the
+speed and climb limits, and says whether the reference acceleration is fed forward and whether
+it holds position (then drifting ``control.divergence_m`` from the set-point fails the flight).
+The controller sees the navigation estimate (true state plus the scenario's sensor noise).
 
 Physics runs at ``physics_hz`` (semi-implicit Euler), control at ``control_hz``; states are
 recorded at the control rate. Per-step work is a few dozen float operations in plain Python
@@ -30,6 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from wtcli.errors import SimulationError
+from wtcli.fly.control import (Controller, FeedForwardController, PidController, PilotController,
+                               PilotInputs, VelocityLimits)
 from wtcli.fly.scenario import Scenario
 from wtcli.fly.wind import WindSeries
 
@@ -185,35 +183,24 @@ class Track:
                 raise ValueError(f"expected {name} of shape ({n}, 3), got {getattr(self, name).shape}")
 
 
-@dataclass(frozen=True)
-class PilotInputs:
-    """Precomputed human-pilot signals (see wtcli.fly.pilot)."""
-
-    delay_steps: int
-    gain: float
-    deadband: float
-    perception: np.ndarray  # (N, 3) judged-position error
-    stick: np.ndarray  # (N, 3) stick noise, m/s
-    max_correction: float
-
-
 def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.ndarray,
-        mode: str, rng: np.random.Generator, pilot: PilotInputs | None = None) -> Track:
-    """Fly ``ref`` and return the track. ``mode``: pid, feedforward or pilot."""
-    if mode not in ("pid", "feedforward", "pilot"):
-        raise ValueError(f"expected mode pid, feedforward or pilot, got {mode!r}")
-    veh, gains, ctl = scn.vehicle, scn.gains, scn.control
+        controller: Controller, rng: np.random.Generator) -> Track:
+    """Fly ``ref`` with ``controller`` (reset first) and return the track. ``rng`` draws the
+    navigation noise the controller sees on position and velocity."""
+    veh, ctl = scn.vehicle, scn.control
     n = len(ref.t)
     sub = scn.substeps
     dt = 1.0 / ctl.control_hz
     dtp = dt / sub
     if len(wind.extra) < n * sub:
         raise ValueError(f"expected {n * sub} wind samples, got {len(wind.extra)}")
+    controller.reset()
+    step = controller.step
+    name = controller.name
 
     # Plain Python lists: indexing them is far cheaper than numpy scalars in the loop.
     R = ref.pos.tolist()
-    V = ref.vel.tolist()
-    A = (ref.acc if gains.feed_forward and mode != "pilot" else np.zeros_like(ref.acc)).tolist()
+    A = (ref.acc if controller.feeds_acceleration else np.zeros_like(ref.acc)).tolist()
     YR, PR = ref.yaw_deg.tolist(), ref.pitch_deg.tolist()
     YF = np.gradient(ref.yaw_deg, dt).tolist()  # set-point rates, fed forward
     PF = np.gradient(ref.pitch_deg, dt).tolist()
@@ -224,91 +211,26 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
     ux_, uy_, _ = wind.unit.tolist()
     wspd, href, alpha = scn.wind.speed_ms, scn.wind.reference_height_m, scn.wind.shear_exponent
 
-    kp, ki, kd = gains.kp, gains.ki, gains.kd
-    ff = 1.0 if gains.feed_forward else 0.0
-    ilim = gains.integral_limit_ms / ki if ki > 0 else 0.0
-    af = dt / (gains.derivative_filter_s + dt)
     tau = veh.velocity_time_constant_s
-    vmax, vup, vdn = veh.max_speed_ms, veh.max_climb_ms, veh.max_descent_ms
     ahmax = G * math.tan(math.radians(veh.max_tilt_deg))
     azmax = veh.max_vertical_accel_ms2
     cd, kq = veh.rotor_drag_per_s, veh.body_drag_per_m
     yr_rate, yr_tau = veh.yaw_rate_deg_s, veh.yaw_time_constant_s
     gp_rate, gp_tau = veh.gimbal_rate_deg_s, veh.gimbal_time_constant_s
-    if pilot is not None:
-        PP, PS = pilot.perception.tolist(), pilot.stick.tolist()
-        pd, pk, pdb, pmax = pilot.delay_steps, pilot.gain, pilot.deadband, pilot.max_correction
 
     px, py, pz = R[0]
     vx = vy = vz = 0.0
-    ix = iy = iz = 0.0
-    vfx = vfy = vfz = 0.0
     yaw, pit = YR[0], PR[0]
     out_p, out_v, out_t, out_w, out_y, out_g = [], [], [], [], [], []
-    hist = []  # true positions, for the pilot's delayed view
     tx = ty = tz = 0.0
     wx = wy = wz = 0.0
-    lost2 = ctl.divergence_m ** 2
+    lost2 = ctl.divergence_m ** 2 if controller.holds_position else math.inf
 
     for k in range(n):
-        rx, ry, rz = R[k]
-        vrx, vry, vrz = V[k]
-        if mode == "pid":
-            nx, ny, nz = npos[k]
-            mvx, mvy, mvz = nvel[k]
-            ex, ey, ez = rx - (px + nx), ry - (py + ny), rz - (pz + nz)
-            vfx += af * (vx + mvx - vfx)
-            vfy += af * (vy + mvy - vfy)
-            vfz += af * (vz + mvz - vfz)
-            cx = ff * vrx + kp * ex + ki * ix + kd * (vrx - vfx)
-            cy = ff * vry + kp * ey + ki * iy + kd * (vry - vfy)
-            cz = ff * vrz + kp * ez + ki * iz + kd * (vrz - vfz)
-        elif mode == "feedforward":
-            cx, cy, cz = vrx, vry, vrz
-        else:
-            hist.append((px, py, pz))
-            j = k - pd
-            if j >= 0:
-                hx, hy, hz = hist[j]
-                qx, qy, qz = PP[j]
-                sx, sy, sz = R[j]
-                ex, ey, ez = sx - (hx + qx), sy - (hy + qy), sz - (hz + qz)
-                e = math.sqrt(ex * ex + ey * ey + ez * ez)
-                if e > pdb:
-                    g = pk * (e - pdb) / e
-                    if g * (e - pdb) > pmax:
-                        g = pmax / e
-                    ex, ey, ez = g * ex, g * ey, g * ez
-                else:
-                    ex = ey = ez = 0.0
-            else:
-                ex = ey = ez = 0.0
-            s0, s1, s2 = PS[k]
-            cx, cy, cz = vrx + ex + s0, vry + ey + s1, vrz + ez + s2
-        # Speed and climb limits; anti-windup: integrate only while unsaturated.
-        sat = False
-        h = math.sqrt(cx * cx + cy * cy)
-        if h > vmax:
-            f = vmax / h
-            cx *= f
-            cy *= f
-            sat = True
-        if cz > vup:
-            cz = vup
-            sat = True
-        elif cz < -vdn:
-            cz = -vdn
-            sat = True
-        if mode == "pid" and not sat:
-            ix += ex * dt
-            iy += ey * dt
-            iz += ez * dt
-            if ix > ilim: ix = ilim  # noqa: E701
-            elif ix < -ilim: ix = -ilim  # noqa: E701
-            if iy > ilim: iy = ilim  # noqa: E701
-            elif iy < -ilim: iy = -ilim  # noqa: E701
-            if iz > ilim: iz = ilim  # noqa: E701
-            elif iz < -ilim: iz = -ilim  # noqa: E701
+        nx, ny, nz = npos[k]
+        mvx, mvy, mvz = nvel[k]
+        cx, cy, cz = step(k, (px + nx, py + ny, pz + nz), (vx + mvx, vy + mvy, vz + mvz),
+                          (px, py, pz))
         arx, ary, arz = A[k]
         agl = pz - GR[k]
         shear = wspd * ((agl if agl > 1.0 else 1.0) / href) ** alpha if wspd > 0 else 0.0
@@ -351,20 +273,48 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
         out_y.append(yaw)
         out_g.append(pit)
         if k % 25 == 0:
-            if not (abs(px) + abs(py) + abs(pz) < DIVERGED_M):
-                raise SimulationError(
-                    f"flight diverged at t={ref.t[k]:.1f} s ({mode} controller): position "
-                    f"({px:.3g}, {py:.3g}, {pz:.3g}); check the gains and limits of the scenario")
-            if mode == "pid" and (px - rx) ** 2 + (py - ry) ** 2 + (pz - rz) ** 2 > lost2:
-                raise SimulationError(
-                    f"flight diverged at t={ref.t[k]:.1f} s: the vehicle is "
-                    f"{math.sqrt((px - rx) ** 2 + (py - ry) ** 2 + (pz - rz) ** 2):.0f} m from its "
-                    f"set-point (more than control.divergence_m = {ctl.divergence_m:g}); the wind "
-                    "may exceed what the vehicle can hold, or the gains are unstable")
+            _check_divergence(ref, k, name, (px, py, pz), lost2, ctl.divergence_m)
     pos = np.array(out_p)
     if not np.isfinite(pos).all() or np.abs(pos).max() >= DIVERGED_M:
         bad = int(np.argmax(~np.isfinite(pos).all(1) | (np.abs(pos).max(1) >= DIVERGED_M)))
-        raise SimulationError(f"flight diverged at t={ref.t[bad]:.1f} s ({mode} controller); "
+        raise SimulationError(f"flight diverged at t={ref.t[bad]:.1f} s ({name} controller); "
                               "check the gains and limits of the scenario")
     return Track(t=ref.t.copy(), pos=pos, vel=np.array(out_v), thrust=np.array(out_t),
                  wind=np.array(out_w), yaw_deg=np.array(out_y), pitch_deg=np.array(out_g))
+
+
+def _check_divergence(ref: Reference, k: int, name: str, p: tuple[float, float, float],
+                      lost2: float, divergence_m: float) -> None:
+    """Raise SimulationError if the state blew up, or (``lost2`` finite: a position-holding
+    controller) the vehicle is more than ``divergence_m`` from its set-point."""
+    px, py, pz = p
+    if not (abs(px) + abs(py) + abs(pz) < DIVERGED_M):
+        raise SimulationError(
+            f"flight diverged at t={ref.t[k]:.1f} s ({name} controller): position "
+            f"({px:.3g}, {py:.3g}, {pz:.3g}); check the gains and limits of the scenario")
+    rx, ry, rz = ref.pos[k].tolist()
+    d2 = (px - rx) ** 2 + (py - ry) ** 2 + (pz - rz) ** 2
+    if d2 > lost2:
+        raise SimulationError(
+            f"flight diverged at t={ref.t[k]:.1f} s: the vehicle is {math.sqrt(d2):.0f} m from "
+            f"its set-point (more than control.divergence_m = {divergence_m:g}); the wind "
+            "may exceed what the vehicle can hold, or the gains are unstable")
+
+
+def make_controller(mode: str, ref: Reference, scn: Scenario,
+                    pilot: PilotInputs | None = None) -> Controller:
+    """The controller a flight kind is flown with: ``pid``, ``feedforward`` or ``pilot``."""
+    veh, gains = scn.vehicle, scn.gains
+    limits = VelocityLimits(veh.max_speed_ms, veh.max_climb_ms, veh.max_descent_ms)
+    R, V = ref.pos.tolist(), ref.vel.tolist()
+    if mode == "pid":
+        return PidController(R, V, 1.0 / scn.control.control_hz, gains.kp, gains.ki, gains.kd,
+                             gains.derivative_filter_s, gains.integral_limit_ms,
+                             gains.feed_forward, limits)
+    if mode == "feedforward":
+        return FeedForwardController(V, limits, gains.feed_forward)
+    if mode == "pilot":
+        if pilot is None:
+            raise ValueError("expected pilot inputs for the pilot controller")
+        return PilotController(R, V, pilot, limits)
+    raise ValueError(f"expected mode pid, feedforward or pilot, got {mode!r}")

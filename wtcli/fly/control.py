@@ -1,0 +1,196 @@
+"""The controllers a flight can be flown with, each a small object with ``reset()`` and ``step()``.
+
+Every controller turns what it knows at one control step into a velocity command ``(vx, vy, vz)``
+(m/s, ENU) that the vehicle's velocity loop then tries to realise (``wtcli.fly.sim``), already
+limited by the vehicle's horizontal speed and climb/descent limits:
+
+- ``PidController``: the paper's eq. 10 per axis on the position error ``e = r - p_est``:
+  ``u = Kp e + Ki int(e) + Kd de/dt`` with ``de/dt = v_ref - v_f`` (derivative on the filtered
+  measured velocity, so set-point steps cause no derivative kick), the reference velocity fed
+  forward, the integral clamped to ``integral_limit_ms / Ki`` and frozen while the command
+  saturates (anti-windup): ``v_cmd = ff v_ref + u``.
+- ``FeedForwardController``: ``v_cmd = v_ref``, the plan flown open-loop (no wind compensation).
+- ``PilotController``: a manual pilot (``wtcli.fly.pilot``) who sees the true position late and
+  misjudged, corrects with a stick gain above a deadband, with stick noise, on top of flying the
+  route's velocity.
+
+``step(k, pos, vel, true_pos)`` gets the control step index ``k`` (into the reference), the
+navigation estimate of position and velocity (what an autopilot sees) and the true position
+(what a pilot's eye sees, before their own misjudgement). The loop asks each controller whether
+it ``feeds_acceleration`` (adds the reference acceleration to the thrust) and whether it
+``holds_position`` (then drifting ``divergence_m`` from the set-point is a failed flight).
+The arithmetic is written out per axis on floats: these run 50 times per simulated second.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class VelocityLimits:
+    """The vehicle's velocity envelope: horizontal speed, climb and descent (m/s, positive)."""
+
+    horizontal: float
+    climb: float
+    descent: float
+
+    def apply(self, cx: float, cy: float, cz: float) -> tuple[float, float, float, bool]:
+        """The command inside the envelope (horizontal direction kept) and whether it was cut."""
+        sat = False
+        h = math.sqrt(cx * cx + cy * cy)
+        if h > self.horizontal:
+            f = self.horizontal / h
+            cx *= f
+            cy *= f
+            sat = True
+        if cz > self.climb:
+            cz = self.climb
+            sat = True
+        elif cz < -self.descent:
+            cz = -self.descent
+            sat = True
+        return cx, cy, cz, sat
+
+
+class Controller:
+    """What the flight loop needs of a controller (see the module docstring)."""
+
+    name = "controller"
+    feeds_acceleration = False
+    holds_position = False
+
+    def reset(self) -> None:
+        """Forget all state: the next ``step`` is the first of a new flight."""
+
+    def step(self, k: int, pos: tuple[float, float, float], vel: tuple[float, float, float],
+             true_pos: tuple[float, float, float]) -> tuple[float, float, float]:
+        raise NotImplementedError
+
+
+class PidController(Controller):
+    """Eq. 10 per axis with reference velocity feed-forward, a first-order filter on the measured
+    velocity for the derivative term, and a clamped integral frozen while saturated."""
+
+    name = "pid"
+    holds_position = True
+
+    def __init__(self, ref_pos: list, ref_vel: list, dt: float, kp: float, ki: float, kd: float,
+                 derivative_filter_s: float, integral_limit_ms: float, feed_forward: bool,
+                 limits: VelocityLimits) -> None:
+        if dt <= 0 or derivative_filter_s < 0:
+            raise ValueError(f"expected dt > 0 and derivative_filter_s >= 0, got {dt}, "
+                             f"{derivative_filter_s}")
+        self.R, self.V = ref_pos, ref_vel
+        self.dt = dt
+        self.kp, self.ki, self.kd = kp, ki, kd
+        self.ff = 1.0 if feed_forward else 0.0
+        self.feeds_acceleration = bool(feed_forward)
+        self.ilim = integral_limit_ms / ki if ki > 0 else 0.0
+        self.af = dt / (derivative_filter_s + dt)
+        self.limits = limits
+        self.reset()
+
+    def reset(self) -> None:
+        self.ix = self.iy = self.iz = 0.0
+        self.vfx = self.vfy = self.vfz = 0.0
+
+    def step(self, k, pos, vel, true_pos):
+        rx, ry, rz = self.R[k]
+        vrx, vry, vrz = self.V[k]
+        mx, my, mz = pos
+        mvx, mvy, mvz = vel
+        ex, ey, ez = rx - mx, ry - my, rz - mz
+        af = self.af
+        self.vfx += af * (mvx - self.vfx)
+        self.vfy += af * (mvy - self.vfy)
+        self.vfz += af * (mvz - self.vfz)
+        ff, kp, ki, kd = self.ff, self.kp, self.ki, self.kd
+        cx = ff * vrx + kp * ex + ki * self.ix + kd * (vrx - self.vfx)
+        cy = ff * vry + kp * ey + ki * self.iy + kd * (vry - self.vfy)
+        cz = ff * vrz + kp * ez + ki * self.iz + kd * (vrz - self.vfz)
+        cx, cy, cz, sat = self.limits.apply(cx, cy, cz)
+        if not sat:  # anti-windup: integrate only while the command is inside the envelope
+            dt, lim = self.dt, self.ilim
+            self.ix = min(max(self.ix + ex * dt, -lim), lim)
+            self.iy = min(max(self.iy + ey * dt, -lim), lim)
+            self.iz = min(max(self.iz + ez * dt, -lim), lim)
+        return cx, cy, cz
+
+
+class FeedForwardController(Controller):
+    """The reference velocity, nothing else: the plan flown without position feedback."""
+
+    name = "feedforward"
+
+    def __init__(self, ref_vel: list, limits: VelocityLimits, feed_forward: bool = True) -> None:
+        self.V = ref_vel
+        self.limits = limits
+        self.feeds_acceleration = bool(feed_forward)
+
+    def step(self, k, pos, vel, true_pos):
+        vrx, vry, vrz = self.V[k]
+        cx, cy, cz, _ = self.limits.apply(vrx, vry, vrz)
+        return cx, cy, cz
+
+
+@dataclass(frozen=True)
+class PilotInputs:
+    """Precomputed human-pilot signals (see wtcli.fly.pilot)."""
+
+    delay_steps: int
+    gain: float
+    deadband: float
+    perception: np.ndarray  # (N, 3) judged-position error
+    stick: np.ndarray  # (N, 3) stick noise, m/s
+    max_correction: float
+
+
+class PilotController(Controller):
+    """A pilot flying the route's velocity and correcting, ``delay_steps`` late, the error they
+    perceive (true position plus a judgement error) beyond a deadband, with stick noise; the
+    correction's speed is capped at ``max_correction``."""
+
+    name = "pilot"
+
+    def __init__(self, ref_pos: list, ref_vel: list, inputs: PilotInputs,
+                 limits: VelocityLimits) -> None:
+        self.R, self.V = ref_pos, ref_vel
+        self.PP, self.PS = inputs.perception.tolist(), inputs.stick.tolist()
+        self.delay, self.gain = inputs.delay_steps, inputs.gain
+        self.deadband, self.max_correction = inputs.deadband, inputs.max_correction
+        self.limits = limits
+        self.reset()
+
+    def reset(self) -> None:
+        self.hist: list[tuple[float, float, float]] = []  # true positions, seen late
+
+    def step(self, k, pos, vel, true_pos):
+        vrx, vry, vrz = self.V[k]
+        self.hist.append(true_pos)
+        j = k - self.delay
+        ex = ey = ez = 0.0
+        if j >= 0:
+            hx, hy, hz = self.hist[j]
+            qx, qy, qz = self.PP[j]
+            sx, sy, sz = self.R[j]
+            ex, ey, ez = sx - (hx + qx), sy - (hy + qy), sz - (hz + qz)
+            e = math.sqrt(ex * ex + ey * ey + ez * ez)
+            pdb = self.deadband
+            if e > pdb:
+                g = self.gain * (e - pdb) / e
+                if g * (e - pdb) > self.max_correction:
+                    g = self.max_correction / e
+                ex, ey, ez = g * ex, g * ey, g * ez
+            else:
+                ex = ey = ez = 0.0
+        s0, s1, s2 = self.PS[k]
+        cx, cy, cz, _ = self.limits.apply(vrx + ex + s0, vry + ey + s1, vrz + ez + s2)
+        return cx, cy, cz
+
+
+__all__ = ["Controller", "FeedForwardController", "PidController", "PilotController",
+           "PilotInputs", "VelocityLimits"]
