@@ -690,6 +690,10 @@ def _summary(routes: list[Route], mission: Mission, pattern: str, check: dict, c
         "standoff_m": pp.standoff,
         "safe_distance_m": s.safe_distance_m,
         "required_clearance_m": pp.required,
+        # read back by `fly` (its margin and battery-reserve checks)
+        "tracking_margin_m": s.tracking_margin_m,
+        "battery_minutes": mission.fleet.battery_minutes,
+        "battery_reserve_minutes": mission.fleet.battery_reserve_minutes,
         "gimbal_pitch_range_deg": list(pp.pitch_range),
         "launch": launch.tolist(),
         "turbines": zones,
