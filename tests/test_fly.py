@@ -198,15 +198,18 @@ def test_clearance_violation_is_detected_when_forced():
     assert f.min_clearance_m == pytest.approx(f.violations[0].worst_m)
 
 
-def test_clearance_is_vectorised_and_matches_the_turbine_model():
+def test_clearance_is_the_projects_one_clearance_and_matches_the_turbine_model():
+    from wtcli.plan.clearance import HORIZON_M, clearance_to_parts
+
     t = turbine()
     rng = np.random.default_rng(0)
     P = t.hub_center + rng.normal(size=(500, 3)) * 40
-    c, part = turbine_clearance([t], P, near_m=1e9)
-    assert np.allclose(c, t.clearance(P))
-    c2, _ = turbine_clearance([t], P)  # culled: exact near, lower bound far
-    near = c < 30
-    assert np.allclose(c2[near], c[near]) and (c2 <= c + 1e-9).all()
+    c, part = turbine_clearance([t], P)
+    c_ref, part_ref = clearance_to_parts([t], P)
+    assert np.array_equal(c, c_ref) and list(part) == list(part_ref)
+    near = c < 30  # exact near the turbine, capped (a lower bound) far away
+    assert np.allclose(c[near], t.clearance(P[near])) and (c <= t.clearance(P) + 1e-9).all()
+    assert c.max() <= HORIZON_M
 
 
 def test_path_deviation_of_known_offsets():

@@ -7,6 +7,7 @@ from typing import Optional
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from wtcli.console import err_console, stage_bars
@@ -15,6 +16,7 @@ from wtcli.errors import SimulationError
 FLIGHT_SCHEMA = "wtinspect.flight"
 FLIGHT_VERSION = 1
 PAPER_TABLE_SCHEMA = "wtinspect.paper_table"
+MAX_WARNINGS = 20  # printed; the report holds every one
 LABELS = {"time_min": "time (min)", "length_m": "length (m)", "coverage_pct": "coverage (%)",
           "deviation_m": "deviation (m)"}
 
@@ -108,6 +110,7 @@ def register(app: typer.Typer) -> None:
             help="Fly the paper's four scenarios and print our figures beside its Table 1."),
     ) -> None:
         """Fly a plan in a simulation with wind; report time, length, coverage, deviation, safety."""
+        from wtcli.fly.flight import describe
         from wtcli.fly.scenario import load_scenario, resolve_scenario
         from wtcli.jsonio import document, dumps, write_json
 
@@ -150,14 +153,15 @@ def register(app: typer.Typer) -> None:
         else:
             _console().print(_flight_table(report))
         for note in report.notes:
-            err_console.print(f"note: {note}")
-        viol = report.automated.violations
-        if viol:
-            v = viol[0]
-            err_console.print(f"[yellow]warning:[/yellow] {len(viol)} safety violation(s) of the "
-                              f"automated flight; first: {v.kind} {v.worst_m:.2f} m at t={v.t_start:.1f} s "
-                              f"({v.uav}, {v.what})")
-            if fail_on_violation:
-                raise SimulationError(f"the automated flight broke the limits {len(viol)} time(s); "
-                                      f"first: {v.kind} {v.worst_m:.2f} m at t={v.t_start:.1f} s "
-                                      f"({v.uav}, {v.what})")
+            err_console.print(f"note: {escape(note)}")
+        warnings = report.warnings()
+        for w in warnings[:MAX_WARNINGS]:
+            err_console.print(f"[yellow]warning:[/yellow] {escape(w)}")
+        if len(warnings) > MAX_WARNINGS:
+            err_console.print(f"[yellow]warning:[/yellow] and {len(warnings) - MAX_WARNINGS} more "
+                              "(all in the report: preflight, flights.*.clearance.violations)")
+        viol = report.preflight + report.automated.violations
+        if viol and fail_on_violation:
+            kinds = sorted({v.kind for v in viol})
+            raise SimulationError(f"the plan and its automated flight broke the limits {len(viol)} "
+                                  f"time(s) ({', '.join(kinds)}); first: {describe(viol[0])}")

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from wtcli.console import StageProgress, stage_ticker
+from wtcli.errors import InputError, PlanError
 from wtcli.fly.pilot import manual_route, ou_series, pilot_inputs
 from wtcli.fly.scenario import Scenario
 from wtcli.fly.sim import G, Reference, Track, fly, make_controller, make_reference
@@ -25,6 +26,7 @@ from wtcli.fly.terrain import Ground
 from wtcli.fly.wind import make_wind
 from wtcli.geometry import Camera, Turbine
 from wtcli.geometry.coverage import Coverage, measure_coverage
+from wtcli.plan.clearance import clearance_to_parts
 from wtcli.plan_file import Plan, Route
 
 FLIGHT_KINDS = ("automated", "no_compensation", "fixed_pattern", "manual")
@@ -92,6 +94,10 @@ class FlightResult:
     photo_gsd_mm: np.ndarray  # (P,) GSD at the nearest surface, per photo
     energy_wh: dict[str, list[float]]  # per UAV, per sortie (split by landings)
     battery_wh: float
+    sortie_time_s: dict[str, list[float]] = field(default_factory=dict)  # per UAV, flown
+    usable_battery_s: float | None = None  # the plan's battery minus reserve (None: not stated)
+    reserve_fraction: float | None = None  # the plan's reserve / battery
+    tracking_margin_m: float | None = None  # the plan's tracking margin (None: not stated)
     notes: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -114,6 +120,43 @@ class FlightResult:
         vals = [v for c in self.planned_coverage.values() for s in c.by_blade_side().values()
                 for v in s.values()]
         return float(np.mean(vals)) if vals else 0.0
+
+    @property
+    def deviation_p999(self) -> float:
+        """The 99.9th percentile of the deviation from the planned path (m): what the plan's
+        tracking margin must cover."""
+        return float(np.percentile(self.deviation, 99.9)) if len(self.deviation) else 0.0
+
+    def sorties_flown(self) -> list[dict[str, Any]]:
+        """Per UAV and sortie: flown time, energy, share of the battery, and whether the battery
+        reserve stayed intact (None where the plan does not state its battery)."""
+        out = []
+        for uav, es in self.energy_wh.items():
+            for i, e in enumerate(es):
+                d = self.sortie_time_s.get(uav, [math.nan] * len(es))[i]
+                ok = None
+                if self.usable_battery_s is not None:
+                    ok = not _reserve_eaten(d, e, self.usable_battery_s, self.reserve_fraction,
+                                            self.battery_wh)
+                out.append({"uav": uav, "sortie": i + 1, "time_s": d, "energy_wh": e,
+                            "battery_used_pct": 100.0 * e / self.battery_wh, "reserve_intact": ok})
+        return out
+
+    def warnings(self) -> list[str]:
+        """What a user must hear about this flight: every safety violation, a deviation beyond
+        the plan's tracking margin, a sortie that ate into the battery reserve."""
+        out = [f"{self.kind}: {describe(v)}" for v in self.violations]
+        m = self.tracking_margin_m
+        if m is not None and self.deviation_p999 > m:
+            out.append(f"{self.kind}: 99.9 % of the flight within {self.deviation_p999:.2f} m of "
+                       f"the planned path, more than the plan's tracking_margin_m ({m:g} m): plan "
+                       "with a larger margin for this wind and positioning (docs/fly.md, Margins)")
+        for s in self.sorties_flown():
+            if s["reserve_intact"] is False:
+                out.append(f"{self.kind}: {s['uav']} sortie {s['sortie']} ate into the battery "
+                           f"reserve ({s['time_s'] / 60:.1f} min, {s['battery_used_pct']:.0f} % of "
+                           "the battery)")
+        return out
 
     @property
     def photos(self) -> int:
@@ -149,7 +192,10 @@ class FlightResult:
             "kind": self.kind, "controller": self.controller,
             "time_s": self.time_s, "path_length_m": self.path_length_m,
             "deviation_m": {"mean": float(dev.mean()), "rms": float(np.sqrt((dev ** 2).mean())),
-                            "max": float(dev.max())},
+                            "p99_9": self.deviation_p999, "max": float(dev.max()),
+                            "tracking_margin_m": self.tracking_margin_m,
+                            "within_margin": None if self.tracking_margin_m is None
+                            else self.deviation_p999 <= self.tracking_margin_m},
             "tracking_error_m": {"mean": float(trk.mean()), "rms": float(np.sqrt((trk ** 2).mean())),
                                  "max": float(trk.max())},
             "clearance": {"min_m": self.min_clearance_m, "safe_distance_m": self.safe_distance_m,
@@ -168,7 +214,9 @@ class FlightResult:
                         "capacity_wh": self.battery_wh,
                         "sorties": int(sum(len(v) for v in self.energy_wh.values())),
                         "max_used_pct": 100.0 * max(max(v) for v in self.energy_wh.values())
-                        / self.battery_wh},
+                        / self.battery_wh,
+                        "usable_s": self.usable_battery_s,
+                        "sorties_flown": self.sorties_flown()},
             "uavs": per_uav, "notes": self.notes,
         }
 
@@ -257,33 +305,52 @@ def path_deviation(path: np.ndarray, segment: np.ndarray, pos: np.ndarray, windo
     return out
 
 
-def turbine_clearance(turbines: list[Turbine], pos: np.ndarray,
-                      near_m: float = 60.0) -> tuple[np.ndarray, np.ndarray]:
-    """Per point: clearance to the nearest turbine part and the index of that turbine/part as
-    "T1/blade2". Points far from a turbine's bounding box get the box distance (a lower bound
-    that is already larger than ``near_m``), so only nearby steps pay for the exact model."""
-    best = np.full(len(pos), np.inf)
-    which = np.full(len(pos), "", dtype=object)
-    for t in turbines:
-        pts = t.surface_samples(2.0).points
-        lo, hi = pts.min(0) - 1.0, pts.max(0) + 1.0
-        box = np.linalg.norm(np.maximum(np.maximum(lo - pos, pos - hi), 0.0), axis=1)
-        near = box < near_m
-        c = box.copy()
-        if near.any():
-            by_part = t.clearance_by_part(pos[near])
-            c[near] = by_part.min(1)
-            names = np.array([f"{t.id}/{p}" for p in t.part_names()], dtype=object)
-            part = names[by_part.argmin(1)]
-        better = c < best
-        best[better] = c[better]
-        if near.any():
-            tmp = np.full(len(pos), f"{t.id}", dtype=object)
-            tmp[near] = part
-            which[better] = tmp[better]
-        else:
-            which[better] = t.id
-    return best, which
+def turbine_clearance(turbines: list[Turbine], pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per point: clearance to the nearest turbine part and its name ("T1/blade2"): the
+    project's one clearance, ``wtcli.plan.clearance.clearance_to_parts`` (exact near a turbine,
+    capped at its cull distance far away)."""
+    return clearance_to_parts(turbines, np.asarray(pos, float))
+
+
+# ---- the plan, checked before flying ----------------------------------------------------------
+
+PREFLIGHT_STEP_M = 0.25  # spacing of the samples along each planned leg
+
+
+def plan_violations(plan: Plan) -> list[Violation]:
+    """Every place where the planned path itself (waypoints and the straight legs between them,
+    sampled every PREFLIGHT_STEP_M) comes closer to a turbine part than the plan's safe distance:
+    ``collision`` where it runs inside a part, ``clearance`` elsewhere, with the planned times.
+    A plan from ``wtinspect plan`` has none; an edited one may."""
+    out: list[Violation] = []
+    for r in plan.routes:
+        if len(r) == 0:
+            continue
+        p0, p1 = r.pos[:-1], r.pos[1:]
+        L = np.linalg.norm(p1 - p0, axis=1)
+        n = np.maximum(1, np.ceil(L / PREFLIGHT_STEP_M).astype(int))
+        leg = np.repeat(np.arange(len(L)), n)
+        frac = (np.arange(len(leg)) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n, n)
+        P = np.concatenate([p0[leg] + frac[:, None] * (p1 - p0)[leg], r.pos[-1:]])
+        T = np.concatenate([r.t[:-1][leg] + frac * np.diff(r.t)[leg], r.t[-1:]])
+        c, part = turbine_clearance(plan.turbines, P)
+        for kind, mask in (("collision", c <= 0.0), ("clearance", (c > 0.0) & (c < plan.safe_distance_m))):
+            for a, b in _episodes(mask):
+                i = a + int(np.argmin(c[a:b]))
+                out.append(Violation(kind, r.uav, float(T[a]), float(T[b - 1]), float(c[i]),
+                                     tuple(float(x) for x in P[i]), str(part[i])))
+    out.sort(key=lambda v: (v.t_start, v.uav, v.kind))
+    return out
+
+
+def describe(v: Violation) -> str:
+    """One violation in words: "collision with T1/tower at t=12.0-13.4 s (UAV1)"."""
+    when = f"t={v.t_start:.1f} s" if v.t_end - v.t_start < 0.05 else f"t={v.t_start:.1f}-{v.t_end:.1f} s"
+    if v.kind == "collision":
+        return f"collision with {v.what} at {when} ({v.uav})"
+    if v.kind == "clearance":
+        return f"clearance {v.worst_m:.2f} m to {v.what} at {when} ({v.uav})"
+    return f"{v.kind}: {v.worst_m:.2f} m above the ground at {when} ({v.uav})"
 
 
 def _episodes(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -293,10 +360,12 @@ def _episodes(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]))
 
 
-def _energy_wh(f: UavFlight, scn: Scenario, ground: Ground) -> list[float]:
-    """Energy of each sortie (Wh). Momentum-theory power, P = P_hover (|T| / g)^1.5 plus climb
-    power m g v_z / eta; zero while the vehicle stands on the ground (motors off: a battery
-    swap), which also separates the sorties."""
+def _sorties(f: UavFlight, scn: Scenario, ground: Ground) -> list[tuple[float, float]]:
+    """(energy Wh, flown time s) of each sortie. Momentum-theory power, P = P_hover (|T| / g)^1.5
+    plus climb power m g v_z / eta; zero while the vehicle stands on the ground (motors off: a
+    battery swap), which also separates the sorties. A sortie's time runs from its take-off (the
+    start, or the end of a swap) to its landing (the last one: the set-point reaching the last
+    waypoint), as the planner counts it against battery minus reserve."""
     veh, track, ref = scn.vehicle, f.track, f.ref
     T = np.linalg.norm(track.thrust + np.array([0, 0, G]), axis=1)
     p = veh.hover_power_w * (T / G) ** 1.5
@@ -305,13 +374,29 @@ def _energy_wh(f: UavFlight, scn: Scenario, ground: Ground) -> list[float]:
     ref_agl = ref.pos[:, 2] - ground.height(ref.pos)
     landed = (ref_agl < 0.5) & (np.linalg.norm(ref.vel, axis=1) < 0.05)  # the plan says so
     p = np.where(landed, 0.0, p)
+    t = track.t
     sorties, start = [], 0
     for a, b in _episodes(landed):
         if (b - a) * dt >= 5.0:
-            sorties.append(float(p[start:a].sum() * dt / 3600.0))
+            sorties.append((float(p[start:a].sum() * dt / 3600.0), float(t[a] - t[start])))
             start = b
-    sorties.append(float(p[start:].sum() * dt / 3600.0))
-    return [e for e in sorties if e > 0.01 * veh.battery_wh] or [sum(sorties)]
+    last = min(max(ref.end_index - 1, start), len(t) - 1)
+    sorties.append((float(p[start:].sum() * dt / 3600.0), float(t[last] - t[start])))
+    kept = [s for s in sorties if s[0] > 0.01 * veh.battery_wh]
+    return kept or [(sum(s[0] for s in sorties), sum(s[1] for s in sorties))]
+
+
+def plan_number(plan: Plan, key: str, lo: float, hi: float) -> float | None:
+    """A number the plan's summary states for ``fly`` (tracking margin, battery), checked: None
+    where an older plan does not state it; InputError where it is not a number in [lo, hi]."""
+    v = plan.summary.get(key) if isinstance(plan.summary, dict) else None
+    if v is None:
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
+            or not lo <= v <= hi:
+        raise InputError(f"plan summary.{key}: expected a number in [{lo:g}, {hi:g}], "
+                         f"got {str(v)[:40]}")
+    return float(v)
 
 
 def measure(kind: str, controller: str, plan: Plan, flights: list[UavFlight], scn: Scenario,
@@ -388,7 +473,9 @@ def measure(kind: str, controller: str, plan: Plan, flights: list[UavFlight], sc
                    zip(r.yaw_deg[r.photo], r.gimbal_pitch_deg[r.photo])]
         pcov = _coverage(plan, cam, np.concatenate(pp), np.array(pr).reshape(-1, 3, 3), scn)
     gsd = cam.gsd_mm(turbine_clearance(plan.turbines, ppos)[0]) if len(ppos) else np.zeros(0)
-    energy = {f.uav: _energy_wh(f, scn, ground) for f in flights}
+    sorties = {f.uav: _sorties(f, scn, ground) for f in flights}
+    energy = {u: [e for e, _ in v] for u, v in sorties.items()}
+    sortie_time = {u: [d for _, d in v] for u, v in sorties.items()}
     notes = list(notes or [])
     asked = np.concatenate([f.route.gimbal_pitch_deg[f.route.photo] for f in flights]) \
         if flights else np.zeros(0)
@@ -405,6 +492,17 @@ def measure(kind: str, controller: str, plan: Plan, flights: list[UavFlight], sc
                 notes.append(f"{kind}: {uav} sortie {i + 1} needs {100 * e / scn.vehicle.battery_wh:.0f} "
                              f"% of a battery ({math.ceil(e / scn.vehicle.battery_wh) - 1} more "
                              "swap(s); the simulation flies on without landing)")
+    battery_min = plan_number(plan, "battery_minutes", 0.1, 1e4)
+    reserve_min = plan_number(plan, "battery_reserve_minutes", 0.0, 1e4)
+    usable_s = 60.0 * (battery_min - reserve_min) if battery_min is not None \
+        and reserve_min is not None else None
+    reserve_frac = reserve_min / battery_min if usable_s is not None else None
+    if usable_s is not None:
+        for uav in sortie_time:
+            for i, (d, e) in enumerate(zip(sortie_time[uav], energy[uav])):
+                for why in _reserve_eaten(d, e, usable_s, reserve_frac, scn.vehicle.battery_wh):
+                    notes.append(f"{kind}: {uav} sortie {i + 1} {why}: the battery reserve "
+                                 "was eaten into")
     return FlightResult(
         kind=kind, controller=controller, uavs=flights, turbines=list(plan.turbines), camera=cam,
         safe_distance_m=plan.safe_distance_m, target_gsd_mm=plan.target_gsd_mm,
@@ -412,7 +510,24 @@ def measure(kind: str, controller: str, plan: Plan, flights: list[UavFlight], sc
         deviation=np.concatenate(devs), tracking_error=np.concatenate(trks), clearance=clearance,
         agl=agl, violations=violations, coverage=coverage, planned_coverage=pcov,
         photo_gsd_mm=np.asarray(gsd, float), energy_wh=energy, battery_wh=scn.vehicle.battery_wh,
-        notes=notes)
+        sortie_time_s=sortie_time, usable_battery_s=usable_s, reserve_fraction=reserve_frac,
+        tracking_margin_m=plan_number(plan, "tracking_margin_m", 0.0, 1000.0), notes=notes)
+
+
+def _reserve_eaten(time_s: float, energy_wh: float, usable_s: float, reserve_frac: float,
+                   battery_wh: float) -> list[str]:
+    """Why a sortie ate into the battery reserve (nothing if it did not): flown longer than
+    battery minus reserve (the plan's minutes), or used more energy than the battery less the
+    same share held back."""
+    out = []
+    if time_s > usable_s + 1e-6:
+        out.append(f"flew {time_s / 60:.2f} min, more than battery minus reserve "
+                   f"({usable_s / 60:.2f} min)")
+    usable_wh = battery_wh * (1.0 - reserve_frac)
+    if energy_wh > usable_wh + 1e-9:
+        out.append(f"used {energy_wh:.0f} Wh, more than the {usable_wh:.0f} Wh of the battery "
+                   f"above its reserve")
+    return out
 
 
 def _split_by(labels: np.ndarray, a: int, b: int) -> list[tuple[int, int]]:
@@ -459,6 +574,7 @@ class FlightReport:
     flights: dict[str, FlightResult]
     plan_source: str | None = None
     notes: list[str] = field(default_factory=list)
+    preflight: list[Violation] = field(default_factory=list)  # the plan's own, before flying
 
     def __post_init__(self) -> None:
         if "automated" not in self.flights:
@@ -487,7 +603,12 @@ class FlightReport:
                 "plan": self.plan_source,
                 "flights": {k: f.to_dict() for k, f in self.flights.items()},
                 "summary": {k: f.summary() for k, f in self.flights.items()},
-                "paper": s.paper, "notes": self.notes}
+                "paper": s.paper, "notes": self.notes,
+                "preflight": {"violations": [v.to_dict() for v in self.preflight]}}
+
+    def warnings(self) -> list[str]:
+        """Every violation of the plan itself, then the automated flight's warnings."""
+        return [f"plan: {describe(v)}" for v in self.preflight] + self.automated.warnings()
 
 
 def fly_plan(plan: Plan, scn: Scenario, baselines: bool = False, fixed_plan: Plan | None = None,
@@ -496,6 +617,13 @@ def fly_plan(plan: Plan, scn: Scenario, baselines: bool = False, fixed_plan: Pla
 
     progress: ``progress(kind, done, total)`` per flight kind (FLIGHT_KINDS), counting its
     routes flown and then its measurement (total: routes + 1)."""
+    preflight = plan_violations(plan)
+    hits = [v for v in preflight if v.kind == "collision"]
+    if hits:
+        shown_ = "; ".join(describe(v) for v in hits[:5])
+        more = f"; and {len(hits) - 5} more" if len(hits) > 5 else ""
+        raise PlanError(f"{plan_source or 'plan'}: the planned path runs inside the turbine "
+                        f"{len(hits)} time(s), not flown: {shown_}{more}")
     ground = make_ground(plan, scn)
     notes = []
     todo = [("automated", "pid", plan)]
@@ -514,8 +642,10 @@ def fly_plan(plan: Plan, scn: Scenario, baselines: bool = False, fixed_plan: Pla
         flights[kind] = measure(kind, mode, p, fly_routes(p, scn, ground, mode, tick), scn, ground,
                                 planned_coverage=kind == "automated")
         tick()
-    return FlightReport(scenario=scn, flights=flights, plan_source=plan_source, notes=notes)
+    return FlightReport(scenario=scn, flights=flights, plan_source=plan_source, notes=notes,
+                        preflight=preflight)
 
 
-__all__ = ["FLIGHT_KINDS", "FlightReport", "FlightResult", "UavFlight", "Violation", "fly_plan",
+__all__ = ["FLIGHT_KINDS", "FlightReport", "FlightResult", "UavFlight", "Violation", "describe",
+           "plan_violations", "fly_plan",
            "fly_route", "measure", "path_deviation", "turbine_clearance"]

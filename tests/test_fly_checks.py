@@ -1,0 +1,143 @@
+"""What `fly` checks on the plan it is given and reports about the flight: non-finite and out-of-
+range numbers refused before flying, the planned path re-checked against the turbine model
+(collisions refused, clearance breaches reported, every one with its kind and time), the
+tracking margin against the 99.9th-percentile deviation, and sorties that eat into the battery
+reserve.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from wtcli.errors import PlanError
+from wtcli.fly.flight import fly_plan, plan_violations
+from wtcli.fly.scenario import default_scenario
+from wtcli.plan_file import Plan, write_plan
+from tests.test_fly import CAM, QUIET, blade_pass_plan, line_plan, route_through, turbine
+
+
+def through_the_tower_plan() -> Plan:
+    """A level line at 20 m that passes straight through the tower (an edited plan)."""
+    pts = np.array([[-30.0, 0.0, 20.0], [-10.0, 0.0, 20.0], [0.0, 0.0, 20.0], [10.0, 0.0, 20.0],
+                    [30.0, 0.0, 20.0]])
+    return Plan([turbine()], CAM, [route_through(pts, 2.0)], safe_distance_m=3.0,
+                target_gsd_mm=1.5)
+
+
+def test_nan_and_infinite_plan_numbers_are_refused_before_flying_as_input_errors(tmp_path, cli):
+    good = tmp_path / "plan.json"
+    write_plan(good, line_plan())
+    text = good.read_text()
+    doc = json.loads(text)
+    bad_safe = tmp_path / "nan_safe.json"
+    bad_safe.write_text(text.replace(f'"safe_distance_m": {doc["safe_distance_m"]}',
+                                     '"safe_distance_m": NaN'))
+    d2 = json.loads(text)
+    d2["turbines"][0]["hub_height"] = 1e300
+    bad_hub = tmp_path / "huge_hub.json"
+    bad_hub.write_text(json.dumps(d2))
+    d3 = json.loads(text)
+    d3["routes"][0]["waypoints"][1]["pos"][2] = "Infinity"
+    bad_wp = tmp_path / "inf_wp.json"
+    bad_wp.write_text(json.dumps(d3).replace('"Infinity"', "Infinity"))
+    for path, what in ((bad_safe, "NaN"), (bad_hub, "hub_height"), (bad_wp, "Infinity")):
+        res = cli("fly", path, "--scenario", "tiny", "--out", tmp_path / "r.json")
+        assert res.exit_code == 3, (path.name, res.exit_code, res.stderr)
+        assert path.name in res.stderr and what in res.stderr
+        assert len(res.stderr.strip().splitlines()) == 1
+        assert not (tmp_path / "r.json").exists()  # refused before flying
+
+
+def test_a_plan_through_the_tower_is_a_collision_refused_before_flying(tmp_path, cli):
+    plan = through_the_tower_plan()
+    v = plan_violations(plan)
+    kinds = [x.kind for x in v]
+    assert "collision" in kinds and "clearance" in kinds  # approach, inside, leave
+    hit = next(x for x in v if x.kind == "collision")
+    assert hit.what == "T1/tower" and hit.worst_m == 0.0
+    # The tower is hit around x = 0, reached after 30 m at 2 m/s.
+    assert 13.0 < hit.t_start < 15.0 < hit.t_end < 17.0
+    with pytest.raises(PlanError, match=r"collision with T1/tower at t=1[34]\.\d-1[56]\.\d s"):
+        fly_plan(plan, default_scenario())
+    path = tmp_path / "plan.json"
+    write_plan(path, plan)
+    res = cli("fly", path, "--scenario", "tiny", "--out", tmp_path / "r.json")
+    assert res.exit_code == 6, res.stderr
+    assert "collision with T1/tower" in res.stderr and "clearance 0.0" not in res.stderr
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_every_clearance_breach_of_the_plan_and_the_flight_is_reported_with_kind_and_time(tmp_path,
+                                                                                          cli):
+    # Two separate passes at 2 m from the blade (safe distance 3 m): two episodes each.
+    one = blade_pass_plan(distance=2.0).routes[0]
+    back = one.pos[::-1] + np.array([0.0, 6.0, 0.0])  # away from the blade, then a second pass
+    pts = np.concatenate([one.pos, back, one.pos])
+    plan = replace(blade_pass_plan(distance=2.0), routes=[route_through(pts, 1.5)])
+    pre = plan_violations(plan)
+    assert [v.kind for v in pre] == ["clearance", "clearance"]
+    assert pre[0].t_end < pre[1].t_start
+    rep = fly_plan(plan, default_scenario(**QUIET))
+    assert len(rep.preflight) == 2
+    warned = rep.warnings()
+    assert sum(w.startswith("plan: clearance") for w in warned) == 2
+    flown = [w for w in warned if w.startswith("automated: clearance")]
+    assert len(flown) == len(rep.automated.violations) >= 2
+    path = tmp_path / "plan.json"
+    write_plan(path, plan)
+    res = cli("fly", path, "--scenario", "tiny", "--out", tmp_path / "r.json")
+    assert res.exit_code == 0, res.stderr
+    assert res.stderr.count("warning: plan: clearance") == 2
+    assert res.stderr.count("warning: automated: clearance") >= 2
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert [v["kind"] for v in doc["preflight"]["violations"]] == ["clearance", "clearance"]
+    for v in doc["preflight"]["violations"]:
+        assert v["t_start_s"] <= v["t_end_s"] and v["what"] == "T1/blade1"
+    res = cli("fly", path, "--scenario", "tiny", "--fail-on-violation")
+    assert res.exit_code == 8 and "clearance" in res.stderr
+
+
+def test_a_plan_from_the_planner_has_no_preflight_violation():
+    # A pass outside the safe distance (what the planner writes).
+    assert plan_violations(blade_pass_plan(distance=5.5)) == []
+
+
+def test_deviation_beyond_the_tracking_margin_is_a_warning():
+    plan = line_plan()
+    scn = default_scenario(wind={"speed_ms": 12, "reference_height_m": 50})
+    tight = replace(plan, summary={"tracking_margin_m": 0.001})
+    loose = replace(plan, summary={"tracking_margin_m": 50.0})
+    a = fly_plan(tight, scn).automated
+    assert a.to_dict()["deviation_m"]["within_margin"] is False
+    assert any("tracking_margin_m" in w for w in a.warnings())
+    b = fly_plan(loose, scn).automated
+    assert b.to_dict()["deviation_m"]["within_margin"] is True
+    assert not any("tracking_margin_m" in w for w in b.warnings())
+    assert a.deviation_p999 == pytest.approx(np.percentile(a.deviation, 99.9))
+    assert fly_plan(plan, scn).automated.to_dict()["deviation_m"]["within_margin"] is None
+
+
+def test_a_sortie_that_eats_into_the_reserve_is_reported_and_warned():
+    plan = line_plan()  # about 40 s of flight
+    scn = default_scenario()
+    short = replace(plan, summary={"battery_minutes": 0.8, "battery_reserve_minutes": 0.5})
+    ample = replace(plan, summary={"battery_minutes": 30.0, "battery_reserve_minutes": 5.0})
+    a = fly_plan(short, scn).automated
+    s = a.to_dict()["battery"]["sorties_flown"]
+    assert len(s) == 1 and s[0]["reserve_intact"] is False and s[0]["time_s"] > 18.0
+    assert any("ate into the battery reserve" in w for w in a.warnings())
+    assert any("battery reserve was eaten" in n for n in a.notes)
+    b = fly_plan(ample, scn).automated
+    assert b.to_dict()["battery"]["sorties_flown"][0]["reserve_intact"] is True
+    assert not any("reserve" in w for w in b.warnings())
+
+
+def test_plan_summary_numbers_fly_reads_are_checked(tmp_path, cli):
+    path = tmp_path / "plan.json"
+    write_plan(path, replace(line_plan(), summary={"battery_minutes": -3}))
+    res = cli("fly", path, "--scenario", "tiny")
+    assert res.exit_code == 3 and "battery_minutes" in res.stderr
