@@ -245,3 +245,53 @@ def test_camera_pose_of_photo_says_why_an_incomplete_pose_is_not_used(tmp_path):
     pose, how = camera_pose_of_photo(p, t, mission, "DJI_0002.JPG")
     assert np.allclose(pose.position, [0, -150, 80], atol=0.02)
     assert how.startswith("the photo's own pose (DJI XMP, EXIF GPS)")
+
+
+def test_plan_uses_the_photos_own_pose_and_says_so(cli, tmp_path, monkeypatch):
+    """`plan` on a DJI-tagged photo taken 55 deg off the rotor axis: the segmenter is stood in
+    for by the true masks, so the figures are the pose's and the pitch stage's: within 2 deg with
+    the photo's pose; from S_p the blades do not even look like a rotor (exit 5); --camera-pose
+    still overrides the tags."""
+    from wtcli.geometry.projection import instance_masks
+    from wtcli.masks import Instances
+    from wtcli.plan.config import load_mission
+    from wtcli.plan_file import read_plan
+    from wtcli.segment import infer
+
+    yml = tmp_path / "site.yaml"
+    yml.write_text(
+        "site:\n  origin: {lat: 53.5511, lon: 9.9937, alt: 12.0}\n"
+        "camera: {sensor_width_mm: 23.2, focal_mm: 16, width_px: 5456, height_px: 3632}\n"
+        "mission: {min_side_coverage: 0.5}\n"  # the figures here are the azimuths, not coverage
+        "turbines:\n  - {id: T1, position: [0, 0, 0], hub_height_m: 80, rotor_diameter_m: 90,\n"
+        "     yaw_deg: 180, blade_azimuths_deg: [80, 200, 320]}\n")
+    t = load_mission(yml).turbine("T1")
+    heading = math.radians(180 + 55)  # the rotor faces south; the camera 55 deg round to the west
+    pos = t.hub_center + 130 * np.array([math.sin(heading), math.cos(heading), 0.0]) + [0, 0, 12]
+    cam = Camera(800, 600, 16, 23.2).looking_at(pos, t.hub_center)
+    inst = instance_masks(t, cam)
+    monkeypatch.setattr(infer, "segment_image", lambda image, **kw: Instances(
+        np.array([lab for lab, _, _ in inst], dtype=object), np.array([m for _, _, m in inst])))
+    meta = _metadata_of(cam, 0.0)
+    img = np.full((600, 800, 3), 200, np.uint8)
+    photo = dji_photo(tmp_path / "DJI_0042.JPG", img, meta.lat, meta.lon, meta.absolute_alt_m,
+                      meta.relative_alt_m, meta.gimbal_yaw_deg, meta.gimbal_pitch_deg)
+    plain = tmp_path / "plain.png"
+    cv2.imwrite(str(plain), img)
+
+    def run(*extra):
+        out = tmp_path / "plan.json"
+        r = cli("plan", yml, *extra, "--out", out)
+        assert r.exit_code == 0, r.output
+        return " ".join(r.output.split()), read_plan(out).turbine("T1").azimuths_deg
+
+    said, got = run(f"T1={photo}")
+    assert "back-projected from the photo's own pose (DJI XMP, EXIF GPS)" in said
+    assert "GimbalYawDegree" in said
+    assert _circ_err(got, t.azimuths_deg) < 2.0, got
+    # The same blades back-projected from S_p come out 84, 217, 307 deg: not even a rotor.
+    r = cli("plan", yml, f"T1={plain}", "--out", tmp_path / "sp.json")
+    assert r.exit_code == 5 and "not spread like a 3-blade rotor" in " ".join(r.output.split())
+    look = t.hub_center
+    said, got = run(f"T1={photo}", "--camera-pose", ",".join(f"{v:.3f}" for v in [*pos, *look]))
+    assert "the given camera pose" in said and _circ_err(got, t.azimuths_deg) < 2.0

@@ -180,6 +180,11 @@ def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None 
                 raise PerceptionError(f"{name}: found {len(res.blades)} blade(s), turbine {owner} "
                                       f"has {t.n_blades}")
             p = pose or mission.extra(owner).camera_pose
+            own = None  # the photo's own tags, where no pose was given (docs/photo-pose.md)
+            if p is None and path.suffix.lower() not in PITCH_SUFFIXES:
+                from wtcli.photo_pose import camera_pose_of_photo
+
+                p, own = camera_pose_of_photo(path, t, mission, name)
             try:
                 az = azimuths_from_pitch(t, res, mission.camera, p)
             except ValueError as e:
@@ -196,7 +201,8 @@ def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None 
                     f"{inferred:.1f} deg is inferred from the rotor's even spacing")
             check_rotor_spacing(az, f"{name}: turbine {owner}")
             per.setdefault(owner, []).append((az, name))
-            how[owner] = "the given camera pose" if p else "S_p looking at the rotor centre"
+            how[owner] = ("the given camera pose" if p and not own else own if p else
+                          "S_p looking at the rotor centre" + (f" ({own})" if own else ""))
     azimuths: dict[str, list[float]] = {}
     sources: dict[str, str] = {}
     for owner, found in per.items():
