@@ -295,3 +295,12 @@ def test_plan_uses_the_photos_own_pose_and_says_so(cli, tmp_path, monkeypatch):
     look = t.hub_center
     said, got = run(f"T1={photo}", "--camera-pose", ",".join(f"{v:.3f}" for v in [*pos, *look]))
     assert "the given camera pose" in said and _circ_err(got, t.azimuths_deg) < 2.0
+    # A pitch JSON measured on the photo: plan finds the photo beside it and reads its tags.
+    pj = tmp_path / "DJI_0042.pitch.json"
+    r = cli("pitch", photo, "--out", pj)
+    assert r.exit_code == 0, r.output
+    said, got = run(f"T1={pj}")
+    assert "the photo's own pose (DJI XMP, EXIF GPS)" in said and _circ_err(got, t.azimuths_deg) < 2.0
+    photo.rename(tmp_path / "moved.jpg")  # the photo gone: S_p, as before
+    r = cli("plan", yml, f"T1={pj}", "--out", tmp_path / "sp2.json")
+    assert r.exit_code == 5 and "not spread like a 3-blade rotor" in " ".join(r.output.split())

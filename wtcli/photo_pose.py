@@ -339,3 +339,15 @@ def camera_pose_of_photo(path: str | Path, turbine, mission, name: str | None = 
                                                     meta.gps_alt_m))}
     return None, ("the photo's tags lack " + ", ".join(k for k, ok in need.items() if not ok)
                   + ", so not its own pose")
+
+
+def photo_beside(pitch_json: str | Path, image_name: str | None) -> Path | None:
+    """The photo a pitch JSON was measured on, where it is still found: next to the JSON, or at
+    the name it records (relative to the working folder). None when neither exists."""
+    if not image_name:
+        return None
+    pitch_json = Path(pitch_json)
+    for cand in (pitch_json.parent / Path(str(image_name)).name, Path(str(image_name))):
+        if cand.is_file():
+            return cand
+    return None

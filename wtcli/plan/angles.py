@@ -181,10 +181,13 @@ def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None 
                                       f"has {t.n_blades}")
             p = pose or mission.extra(owner).camera_pose
             own = None  # the photo's own tags, where no pose was given (docs/photo-pose.md)
-            if p is None and path.suffix.lower() not in PITCH_SUFFIXES:
-                from wtcli.photo_pose import camera_pose_of_photo
+            if p is None:
+                from wtcli.photo_pose import camera_pose_of_photo, photo_beside
 
-                p, own = camera_pose_of_photo(path, t, mission, name)
+                src = path if path.suffix.lower() not in PITCH_SUFFIXES else \
+                    photo_beside(path, image_name)
+                if src is not None:
+                    p, own = camera_pose_of_photo(src, t, mission, name)
             try:
                 az = azimuths_from_pitch(t, res, mission.camera, p)
             except ValueError as e:
