@@ -102,8 +102,8 @@ def read_image(path: Path) -> np.ndarray:
         raise InputError(f"{path}: cannot read ({os_reason(e)})") from None
     size = declared_size(data)
     if size is not None and size[0] * size[1] > MAX_IMAGE_PIXELS:
-        raise InputError(f"{path}: {size[0]}x{size[1]} is {size[0] * size[1]:,} pixels, over the "
-                         f"limit of {MAX_IMAGE_PIXELS:,} (docs/exit-codes.md); downscale it first")
+        raise InputError(f"{path}: image too large to decode ({size[0]}x{size[1]} is {size[0] * size[1]:,} pixels, over the "
+                         f"limit of {MAX_IMAGE_PIXELS:,}, docs/exit-codes.md); downscale it first")
     try:
         img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
     except cv2.error as e:  # OpenCV refuses to allocate a decompression bomb
