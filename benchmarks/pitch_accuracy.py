@@ -3,7 +3,7 @@
     python benchmarks/pitch_accuracy.py [--n 500] [--seed 0] [--width 1024] [--height 768]
 
 Each sample is a random turbine (size, yaw, rotor azimuth) seen through the one geometry
-(``Turbine.with_rotor_azimuth`` + ``Camera.looking_at`` + ``geometry.render.instance_masks``):
+(``Turbine.with_rotor_azimuth`` + ``Camera.looking_at`` + ``geometry.projection.instance_masks``):
 
 * front: the camera on the rotor axis in front of the hub, small random offsets, roll 0, at a
   distance where the rotor diameter fills 40-90 % of the frame height;
@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from wtcli.errors import PerceptionError  # noqa: E402
 from wtcli.geometry import Camera, Turbine  # noqa: E402
-from wtcli.geometry.render import instance_masks  # noqa: E402
+from wtcli.geometry.projection import instance_masks  # noqa: E402
 from wtcli.masks import Instances  # noqa: E402
 from wtcli.pitch import classify_theta, pitch_from_instances  # noqa: E402
 

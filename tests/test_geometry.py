@@ -8,7 +8,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from wtcli.geometry import BLADE_SIDES, Camera, Turbine
-from wtcli.geometry.render import instance_masks, part_id_map
+from wtcli.geometry.projection import instance_masks, part_id_map
 
 
 def make_turbine(az=90.0, yaw=0.0, **kw):

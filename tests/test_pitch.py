@@ -13,7 +13,7 @@ import pytest
 from wtcli.contours import find_contours
 from wtcli.errors import InputError, PerceptionError
 from wtcli.geometry import Camera, Turbine
-from wtcli.geometry.render import instance_masks
+from wtcli.geometry.projection import instance_masks
 from wtcli.masks import Instances, write_instances
 from wtcli.pitch import (ACUTE, HORIZONTAL, PITCH_SCHEMA, VERTICAL, BladePitch, classify_theta,
                          draw_pitch_overlay, measure_pitch, normalize_theta, pitch_from_instances,

@@ -75,7 +75,7 @@ def register(app: typer.Typer) -> None:
         from wtcli.plan.config import load_mission
         from wtcli.plan.exports import export_all
         from wtcli.plan.mission import PATTERNS, plan_mission
-        from wtcli.plan.picture import draw_plan
+        from wtcli.plan.path_views import draw_plan
 
         if pattern not in PATTERNS:
             raise ConfigError(f"--pattern: expected one of {', '.join(PATTERNS)}, got {pattern!r}")

@@ -10,5 +10,5 @@ Where things are:
   ``wtcli/geometry/clearance_kernel.py``)
 * ``mission.py`` ``plan_mission``: order, fleet split, batteries, timing, checks, coverage
 * ``exports.py`` QGroundControl .plan, MAVLink QGC WPL 110, GeoJSON
-* ``picture.py`` front/side/top views of the path (PNG)
+* ``path_views.py`` front/side/top views of the path (PNG)
 """

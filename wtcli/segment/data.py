@@ -36,7 +36,7 @@ class Sample:
 def _fallback_render(seed: int, width: int, height: int, view: str | None = None) -> Sample:
     """Masks from the one geometry on a plain gradient sky: used only when the synthetic
     renderer (wtcli.synth.render) is not importable, e.g. while developing the trainer."""
-    from wtcli.geometry.render import instance_masks
+    from wtcli.geometry.projection import instance_masks
     from wtcli.synth.scene import sample_scene
 
     rng = np.random.default_rng(seed)
