@@ -21,6 +21,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _results import save  # noqa: E402  (figures with the command, date and machine)
 
 from wtcli.errors import PlanError  # noqa: E402
 from wtcli.geometry import Camera, Turbine  # noqa: E402
@@ -133,6 +136,7 @@ def main() -> None:
            "adaptive_vs_fixed_y": compare(a.cases)}
     summary = {k: v for k, v in res["adaptive_vs_fixed_y"].items() if k != "rows"}
     print(json.dumps({"timing": res["timing"], **summary}, indent=1))
+    print(f"wrote {save('plan_benchmark', {'timing': res['timing'], 'adaptive_vs_fixed_y': summary})}")
     if a.out:
         Path(a.out).write_text(json.dumps(res, indent=1))
 

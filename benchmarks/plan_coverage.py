@@ -34,6 +34,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _results import save  # noqa: E402  (figures with the command, date and machine)
 
 from wtcli.errors import PlanError  # noqa: E402
 from wtcli.geometry import BLADE_SIDES, Camera, Turbine  # noqa: E402
@@ -195,6 +198,7 @@ def main() -> None:
     a = ap.parse_args()
     res = run(a.cases, a.seed, a.why, a.spacing, a.gimbal_max)
     print(json.dumps(res["summary"], indent=1))
+    print(f"wrote {save('plan_coverage', {'summary': res['summary'], 'refused': res['refused']})}")
     if a.out:
         Path(a.out).write_text(json.dumps(res, indent=1))
 

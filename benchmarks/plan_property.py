@@ -6,7 +6,8 @@ Random sites (``random_site``): 1-4 turbines spread over up to 10 km, 1-5 blades
 20-75 m, any yaw; a quarter with a blade pointing straight down in front of the tower, a quarter
 with a wide tower (base radius 3-6 m); a third of the fleets with a gimbal that looks up only
 20-60 deg (some also down only to -60); safe distance 2.5-6 m, tracking margin 0-1.5 m, target
-GSD 1.2-2.5 mm/px; 1-3 UAVs; everything else the packaged defaults (min_side_coverage 0.9). Each
+GSD 1.2-2.5 mm/px; 1-3 UAVs with a battery that reaches the far side of the site (25 min plus
+the round trip at cruise speed); everything else the packaged defaults (min_side_coverage 0.9). Each
 site goes through the turbines.yaml path (``mission_from_dict``) and ``plan_mission``.
 
 Every plan written is checked without the planner's clearance code (``independent_clearance``:
@@ -69,7 +70,11 @@ def random_site(rng: np.random.Generator) -> dict:
             rb = float(rng.uniform(3, 6))
             t["tower"] = {"base_radius_m": rb, "top_radius_m": float(rb * rng.uniform(0.6, 1.0))}
         turbines.append(t)
-    fleet = {"uavs": int(rng.integers(1, 4))}
+    # One launch point serves the whole site: a battery that reaches the far side and back at
+    # cruise speed (8 m/s) on top of the default 25 min, as a wide site needs.
+    far = max(float(np.linalg.norm(q)) for q, _ in placed) + 60.0
+    fleet = {"uavs": int(rng.integers(1, 4)),
+             "battery_minutes": round(25.0 + 2 * far / 8.0 / 60.0, 1)}
     if rng.random() < 1 / 3:
         fleet["gimbal_pitch_max_deg"] = float(rng.uniform(20, 60))
         if rng.random() < 0.5:
