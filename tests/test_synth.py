@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 
+import cv2
 import numpy as np
 import pytest
 
@@ -236,3 +237,183 @@ def test_truth_lists_every_instance_and_distant_turbines_are_labelled():
         assert {b["index"] for b in s.truth["blades"] if b["visible"]} == main_blades
         found_distant |= any(o["turbine"] > 0 for o in owners)
     assert found_distant
+
+
+# ---- the wider views (opt-in: closeup, nadir, hub, cut, broadside, overtower, distant) --------
+from wtcli.geometry import Camera, Turbine  # noqa: E402
+from wtcli.geometry.projection import part_id_map  # noqa: E402
+from wtcli.synth import ALL_VIEWS, WIDE_VIEWS, parse_view_mix  # noqa: E402
+from wtcli.synth import clutter  # noqa: E402
+from wtcli.synth.render import blade_image_angle, draw_view  # noqa: E402
+
+WW, WH = 200, 150
+
+
+def _digest(s):
+    import hashlib
+
+    d = hashlib.sha256()
+    d.update(s.image.tobytes())
+    d.update(np.packbits(s.instances.masks).tobytes())
+    d.update(json.dumps(list(s.instances.labels)).encode())
+    d.update(json.dumps(s.truth, sort_keys=True).encode())
+    return d.hexdigest()[:16]
+
+
+def test_default_renders_stay_byte_identical():
+    """The wider views are opt-in: the default mix and the four whole-rotor views render what
+    they rendered before them (the held-out benchmark and trained models depend on it). The
+    digests (image, masks, labels, truth) were taken before the wider views existed."""
+    assert _digest(render_sample(0, 96, 64)) == "71ec3ee0f998eab1"
+    assert _digest(render_sample(3, 96, 64, view="front")) == "4daa51fbf5921e90"
+    assert _digest(render_sample(4, 96, 64, view="rear", labels="half")) == "8d17ae1598c7394b"
+
+
+@pytest.fixture(scope="module")
+def wide_samples():
+    return {v: [render_sample(s, WW, WH, view=v) for s in (1, 2)] for v in WIDE_VIEWS}
+
+
+def test_wide_views_render_with_consistent_truth(wide_samples):
+    assert ALL_VIEWS[:4] == ("front", "oblique", "side", "rear")  # seeds of old views unchanged
+    for view, samples in wide_samples.items():
+        for s in samples:
+            assert s.image.shape == (WH, WW, 3) and s.image.dtype == np.uint8
+            assert s.truth["view"] == view and "view_detail" in s.truth
+            assert s.instances.masks.shape[1:] == (WH, WW)
+            assert set(s.instances.labels) <= {"blade", "tower", "nacelle"}
+            assert s.instances.masks.sum(0).max() <= 1 if len(s.instances) else True
+            owners = s.truth["instances"]
+            assert len(owners) == len(s.instances)
+            for o, label in zip(owners, s.instances.labels):
+                assert (o["blade"] is not None) == (label == "blade")
+            assert any(o["turbine"] == 0 for o in owners), (view, s.truth["seed"])
+    again = render_sample(2, WW, WH, view="nadir")
+    assert _digest(again) == _digest(wide_samples["nadir"][1])
+
+
+def test_closeup_blade_fills_the_frame_and_its_mask_is_the_projected_blade():
+    """A close-up's blade mask is the blade the one geometry projects (half-coverage labels,
+    so no blur widens it), and it fills a good part of the frame."""
+    checked = 0
+    for seed in range(4):
+        s = render_sample(seed, 240, 180, view="closeup", labels="half")
+        t, cam = Turbine.from_dict(s.truth["turbine"]), Camera.from_dict(s.truth["camera"])
+        k = s.truth["view_detail"]["blade"]
+        ids = part_id_map(t, cam)
+        masks = _main_blades(s)
+        assert k in masks, seed
+        m, ref = masks[k], ids == k
+        assert m.mean() > 0.04, (seed, m.mean())
+        iou = (m & ref).sum() / (m | ref).sum()
+        assert iou > 0.93, (seed, iou)
+        checked += 1
+    assert checked == 4
+
+
+def test_recorded_blade_angles_come_from_the_geometry(wide_samples):
+    for samples in wide_samples.values():
+        for s in samples:
+            t, cam = Turbine.from_dict(s.truth["turbine"]), Camera.from_dict(s.truth["camera"])
+            for b in s.truth["blades"]:
+                k = b["index"]
+                assert b["phi_deg"] == pytest.approx(blade_image_angle(t, cam, k), abs=1e-9)
+                ends = np.array([t.hub_center, t.blade_tips()[k]])
+                if (cam.to_camera(ends)[:, 2] > 0.5).all():
+                    assert b["phi_deg"] == pytest.approx(cam.image_angle_deg(*ends), abs=1e-9)
+                assert b["theta_deg"] == pytest.approx(b["phi_deg"] % 180, abs=1e-9)
+
+
+def test_blade_angle_along_the_blade_when_the_hub_is_behind_the_camera():
+    t = Turbine.with_rotor_azimuth(0.0, id="T", base=(0, 0, 0), hub_height=100, rotor_diameter=100,
+                                   yaw_deg=0.0)
+    cam = Camera(640, 480, 8.8, 13.2)
+    # Looking at the blade's outer half from beside the hub, the hub behind the camera.
+    cam = cam.looking_at(t.hub_center + np.array([15.0, 20.0, 0.0]),
+                         t.hub_center + np.array([45.0, 0.0, 0.0]))
+    assert cam.to_camera(t.hub_center[None])[0, 2] < 0
+    phi = blade_image_angle(t, cam, 0)
+    a, b = t.hub_center + 30 * t.blade_direction(0), t.hub_center + 40 * t.blade_direction(0)
+    assert phi == pytest.approx(cam.image_angle_deg(a, b), abs=1e-6)
+
+
+def test_distractors_never_enter_the_masks():
+    """Distractors are never labelled: with half-coverage labels every mask pixel lies on a
+    projected turbine part (main, others, spare blades), and no mask pixel lies wholly under
+    a structure standing in front of the turbines (redrawn from the ground truth)."""
+    hidden = 0
+    for seed in (2, 4, 9, 13):
+        s = render_sample(seed, WW, WH, view="distant", labels="half")
+        cam = Camera.from_dict(s.truth["camera"])
+        front = [clutter.Structure("x", np.array(d["members"]), np.array(d["radius"]), (0, 0, 0), True)
+                 for d in s.truth["distractor_members"] if d["foreground"]]
+        assert front, seed
+        cov = clutter.foreground_coverage(cam, front, 2).reshape(WH, 2, WW, 2).all(axis=(1, 3))
+        union = s.instances.masks.any(0) if len(s.instances) else np.zeros((WH, WW), bool)
+        assert not (union & cov).any(), seed
+        parts = np.zeros((WH, WW), bool)
+        for td in [s.truth["turbine"]] + s.truth["other_turbines"]:
+            parts |= part_id_map(Turbine.from_dict(td), cam) >= 0
+        grown = cv2.dilate(parts.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+        assert not (union & ~grown).any(), seed
+        hidden += int((parts & cov).sum())
+    assert hidden > 0  # some structure does stand in front of a turbine
+
+
+def test_nadir_spare_blades_lie_on_the_ground_labelled_as_blades():
+    found = 0
+    for seed in (0, 3, 6):
+        s = render_sample(seed, WW, WH, view="nadir")
+        assert s.truth["view_detail"]["camera_pitch_deg"] <= -50
+        spares = [Turbine.from_dict(d) for d in s.truth["spare_blades"]]
+        assert len(spares) == s.truth["view_detail"]["spare_blades"] >= 2
+        for sp in spares:
+            z = clutter.blade_mesh(sp, 20, 40).vertices[:, 2]
+            assert -1e-6 < z.min() < 0.2  # resting on the ground, not in it
+            assert abs(sp.blade_direction(0)[2]) < 1e-9  # flat
+        for o, label in zip(s.truth["instances"], s.instances.labels):
+            if o["turbine_id"].startswith("S"):
+                assert label == "blade"
+                found += 1
+    assert found >= 4
+
+
+def test_view_mix_shares_and_determinism():
+    assert parse_view_mix("front,closeup") == {"front": 0.5, "closeup": 0.5}
+    assert parse_view_mix({"nadir": 3, "hub": 1}) == {"nadir": 0.75, "hub": 0.25}
+    mixed = parse_view_mix("mixed=0.5,distant=0.5")
+    assert mixed["distant"] == 0.5 and mixed["front"] == pytest.approx(0.21)
+    for bad, words in (("", "at least one"), ("top", "'top'"), ("front=x", "number"),
+                       ("front=-1", "share"), ("front=0", "positive")):
+        with pytest.raises(ValueError, match=words):
+            parse_view_mix(bad)
+    mix = parse_view_mix("closeup=0.7,nadir=0.3")
+    draws = [draw_view(i, WW, WH, mix) for i in range(200)]
+    assert 120 <= draws.count("closeup") <= 160
+    a = render_sample(5, 96, 64, view_mix=mix)
+    b = render_sample(5, 96, 64, view=draw_view(5, 96, 64, mix))
+    assert a.image.tobytes() == b.image.tobytes() and a.truth["view_mix"] == mix
+    with pytest.raises(ValueError, match="both"):
+        render_sample(5, 96, 64, view="front", view_mix=mix)
+
+
+def test_cli_view_mix(cli, tmp_path):
+    r = cli("synth", tmp_path / "m", "-n", 2, "-s", 1, "--width", 96, "--height", 64,
+            "--view-mix", "closeup,nadir", "--json")
+    assert r.exit_code == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert doc["view"] == "mix" and doc["view_mix"] == {"closeup": 0.5, "nadir": 0.5}
+    assert sum(doc["views"].values()) == 2 and set(doc["views"]) <= {"closeup", "nadir"}
+    for args in (["--view-mix", "top"], ["--view-mix", "front=x"], ["--view", "front", "--view-mix", "nadir"]):
+        r = cli("synth", tmp_path / "o", *args)
+        assert r.exit_code == ExitCode.CONFIG and "--view-mix" in r.stderr and r.stdout == ""
+        assert len(r.stderr.strip().splitlines()) == 1
+
+
+def test_wide_views_render_tiny_images_cleanly():
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for view in WIDE_VIEWS:
+            assert render_sample(1, 33, 47, view=view).image.shape == (47, 33, 3)

@@ -9,7 +9,8 @@ import typer
 
 from wtcli.errors import ConfigError
 
-VIEW_CHOICES = ("front", "oblique", "side", "rear", "mixed")
+VIEW_CHOICES = ("front", "oblique", "side", "rear", "mixed", "closeup", "nadir", "hub", "cut",
+                "broadside", "overtower", "distant")
 
 
 def synth(
@@ -20,7 +21,13 @@ def synth(
     width: int = typer.Option(640, "--width", help="Image width in pixels (32..8192)."),
     height: int = typer.Option(480, "--height", help="Image height in pixels (32..8192)."),
     view: str = typer.Option("mixed", "--view",
-                             help="front | oblique | side | rear | mixed (draw one per image)."),
+                             help="front | oblique | side | rear | mixed (draw one per image), or a "
+                                  "wider view: closeup | nadir | hub | cut | broadside | overtower | "
+                                  "distant (docs/synth.md)."),
+    view_mix: str | None = typer.Option(None, "--view-mix",
+                                 help="Draw each image's view from these shares instead, e.g. "
+                                      "'mixed=0.5,closeup=0.2,nadir=0.1,distant=0.2' or "
+                                      "'closeup,nadir' (equal shares)."),
     labels: str = typer.Option("outline", "--labels",
                                help="Label convention: outline (every pixel a part visibly tints, "
                                     "as photos are annotated) | half (a part covering half of the "
@@ -42,12 +49,21 @@ def synth(
         raise ConfigError(f"--view: expected one of {', '.join(VIEW_CHOICES)}, got {view!r}")
     if labels not in LABELS:
         raise ConfigError(f"--labels: expected one of {', '.join(LABELS)}, got {labels!r}")
+    if view_mix is not None:
+        from wtcli.synth.render import parse_view_mix
+
+        if view != "mixed":
+            raise ConfigError(f"--view-mix: expected no --view with it, got --view {view}")
+        try:
+            view_mix = parse_view_mix(view_mix)
+        except ValueError as e:
+            raise ConfigError(f"--view-mix: {e}") from None
     from wtcli.outputs import writable_folder
 
     writable_folder(out, "output folder")
     summary = render_dataset(out, count, seed, width, height,
                              view=None if view == "mixed" else view, progress=not json_out,
-                             labels=labels)
+                             labels=labels, view_mix=view_mix)
     if json_out:
         typer.echo(dumps(document("wtinspect.synth_summary", 1, summary)))
     else:

@@ -25,10 +25,12 @@ from wtcli.geometry.projection import ProjectedMesh, paint, project_mesh
 from wtcli.jsonio import atomic_write_bytes, document, write_json
 from wtcli.masks import CATEGORIES, INSTANCES_SCHEMA, INSTANCES_VERSION, Instances
 from wtcli.pitch.angles import classify_theta
+from wtcli.synth import clutter
 from wtcli.synth.background import render_background, sky_colours, sun_direction
 from wtcli.synth.noise import fbm
 from wtcli.synth.post import apply_blur, camera_effects
 from wtcli.synth.scene import VIEWS, Scene, sample_scene
+from wtcli.synth.views import WIDE_VIEWS, sample_wide_scene
 
 TRUTH_SCHEMA = "wtinspect.synth_truth"
 TRUTH_VERSION = 1
@@ -40,6 +42,10 @@ SUPERSAMPLE = 2
 # the blur; what models trained before 2026-12-02 learnt) ended on 61 %.
 LABELS = {"outline": 0.05, "half": 0.5}
 _LOGO_COLOURS = ((0.55, 0.25, 0.05), (0.2, 0.45, 0.1), (0.15, 0.15, 0.6), (0.3, 0.3, 0.3))
+# Every view render_sample takes: the whole-rotor views (the default mix, VIEW_ODDS) and the
+# wider, opt-in ones (wtcli.synth.views). A view's index seeds its scenes, so new views go last.
+ALL_VIEWS = VIEWS + WIDE_VIEWS
+VIEW_MIX_STREAM = 7_000_003  # the stream a view mix draws each image's view from
 
 
 def min_instance_pixels(width: int, height: int) -> int:
@@ -68,16 +74,75 @@ def _check_args(seed: int, width: int, height: int, view: str | None) -> None:
         raise ValueError(f"expected a seed >= 0, got {seed!r}")
     if not (32 <= width <= 8192 and 32 <= height <= 8192):
         raise ValueError(f"expected width and height in 32..8192, got {width}x{height}")
-    if view is not None and view not in VIEWS:
-        raise ValueError(f"expected view in {VIEWS} or None, got {view!r}")
+    if view is not None and view not in ALL_VIEWS:
+        raise ValueError(f"expected view in {ALL_VIEWS} or None, got {view!r}")
+
+
+def parse_view_mix(text: str | dict[str, float] | None) -> dict[str, float] | None:
+    """A view mix as shares per view, normalised to sum to 1, from a mapping or a text:
+    ``"front,closeup,nadir"`` (equal shares) or ``"front=0.5,closeup=0.3,nadir=0.2"`` (any
+    positive weights). ``"mixed"`` stands for the default mix (VIEW_ODDS). None -> None."""
+    from wtcli.synth.scene import VIEW_ODDS
+
+    if text is None:
+        return None
+    if isinstance(text, dict):
+        items = [(str(k), v) for k, v in text.items()]
+    else:
+        items = []
+        for part in str(text).split(","):
+            part = part.strip()
+            if not part:
+                continue
+            name, eq, w = part.partition("=")
+            name = name.strip()
+            if not eq:
+                items.append((name, 1.0))
+                continue
+            try:
+                items.append((name, float(w)))
+            except ValueError:
+                raise ValueError(f"expected a number after {name}=, got {w.strip()!r}") from None
+    if not items:
+        raise ValueError("expected at least one view in the view mix, got none")
+    mix: dict[str, float] = {}
+    for name, w in items:
+        if name == "mixed":
+            for v, odds in VIEW_ODDS.items():
+                mix[v] = mix.get(v, 0.0) + float(w) * odds
+            continue
+        if name not in ALL_VIEWS:
+            raise ValueError(f"expected views from {', '.join(ALL_VIEWS + ('mixed',))}, got {name!r}")
+        if not (isinstance(w, (int, float)) and math.isfinite(w) and w >= 0):
+            raise ValueError(f"expected a share >= 0 for {name}, got {w!r}")
+        mix[name] = mix.get(name, 0.0) + float(w)
+    total = sum(mix.values())
+    if total <= 0:
+        raise ValueError("expected a view mix with a positive share, got all zero")
+    return {k: v / total for k, v in mix.items() if v > 0}
+
+
+def draw_view(seed: int, width: int, height: int, view_mix: dict[str, float]) -> str:
+    """The view a view mix gives image ``seed`` (a stream of its own, so the image is then the
+    very render of that view: ``render_sample(seed, view=draw_view(...))``)."""
+    names = sorted(view_mix)
+    p = np.array([view_mix[n] for n in names], float)
+    vrng = np.random.default_rng([int(seed), width, height, VIEW_MIX_STREAM])
+    return names[int(vrng.choice(len(names), p=p / p.sum()))]
 
 
 def render_sample(seed: int, width: int = 640, height: int = 480,
                   view: str | None = None, stops: float = 0.0,
-                  labels: str = "outline") -> SynthSample:
-    """One synthetic photo; a pure function of (seed, width, height, view, stops, labels).
+                  labels: str = "outline", view_mix: str | dict[str, float] | None = None) -> SynthSample:
+    """One synthetic photo; a pure function of (seed, width, height, view, stops, labels,
+    view_mix).
 
-    ``view``: "front", "oblique", "side", "rear", or None to draw one (VIEW_ODDS).
+    ``view``: "front", "oblique", "side", "rear", or None to draw one (VIEW_ODDS); or one of
+    the wider views (WIDE_VIEWS: "closeup", "nadir", "hub", "cut", "broadside", "overtower",
+    "distant"; docs/synth.md).
+    ``view_mix``: with ``view`` None, draw the view from these shares instead of VIEW_ODDS
+    (``parse_view_mix``: a mapping or text such as "front=0.5,closeup=0.5"); the image is then
+    the render of the drawn view. None (the default) leaves every render as it was.
     ``stops``: the chance that the rotor stands where crews stop it for an inspection, a "Y"
     or an inverted "Y" (a blade straight up or down, +-10 deg; training's emphasis on the blade
     in front of the tower); decided on a stream of its own, so with 0 (the held-out sets) or
@@ -89,31 +154,72 @@ def render_sample(seed: int, width: int = 640, height: int = 480,
         raise ValueError(f"expected labels in {tuple(LABELS)}, got {labels!r}")
     if not 0.0 <= stops <= 1.0:
         raise ValueError(f"expected stops in [0, 1], got {stops!r}")
+    mix = parse_view_mix(view_mix)
+    if mix is not None:
+        if view is not None:
+            raise ValueError(f"expected a view or a view mix, got both ({view!r} and {view_mix!r})")
+        view = draw_view(seed, width, height, mix)
     azimuth = None
     if stops > 0:
         srng = np.random.default_rng([int(seed), width, height, 7_000_001])
         if srng.random() < stops:
             azimuth = float(srng.choice([90.0, 270.0]) + srng.uniform(-10.0, 10.0))
-    rng = np.random.default_rng([int(seed), width, height, (VIEWS.index(view) + 1) if view else 0])
-    scene = sample_scene(rng, width, height, view, rotor_azimuth=azimuth)
+    rng = np.random.default_rng([int(seed), width, height, (ALL_VIEWS.index(view) + 1) if view else 0])
+    wide = view in WIDE_VIEWS
+    if wide:
+        scene = sample_wide_scene(rng, width, height, view, rotor_azimuth=azimuth)
+    else:
+        scene = sample_scene(rng, width, height, view, rotor_azimuth=azimuth)
     cam = scene.camera
     zenith, horizon = sky_colours(scene.env, rng)
     bg = render_background(cam, scene.env, scene.turbine, rng, zenith, horizon)
+    if wide:
+        bg = clutter.paint_tracks(bg, scene, rng, horizon)
     bg = _shadows(bg, scene)
     bg = _distractors(bg, scene, rng)
     bg = _buildings(bg, scene, rng, horizon)
+    structures: list[clutter.Structure] = []
+    if wide:
+        near, _ = clutter.turbine_distances((scene.turbine,) + scene.others + scene.spares, cam)
+        _, far = clutter.turbine_distances((scene.turbine,) + scene.spares, cam)
+        structures = clutter.sample_structures(rng, scene, (near, far))
+        bg = clutter.paint_background_structures(
+            bg, cam, [s for s in structures if not s.foreground], scene.env, horizon, rng)
 
-    turbines = (scene.turbine,) + scene.others
-    colour, (parts, boxes) = _render_turbines(turbines, scene, rng, zenith, horizon)
+    turbines = (scene.turbine,) + scene.others + scene.spares
+    colour, (parts, boxes) = _render_turbines(turbines, scene, rng, zenith, horizon,
+                                              blade_only=len(scene.spares))
     premult, alpha = colour
     img = premult + bg * (1.0 - alpha[..., None])
+    front = [s for s in structures if s.foreground]
+    if front:
+        img, parts = clutter.paint_foreground_structures(img, parts, cam, front, scene.env,
+                                                         horizon, rng, SUPERSAMPLE)
     img = _lens_flare(img.astype(np.float32), scene, rng)
+    if wide:
+        img = clutter.glare(img, scene)
     image, effects = camera_effects(img, rng)
 
     blur = effects.get("blur") if labels == "outline" else None
     instances, owners = _instances(parts, boxes, turbines, width, height, blur, LABELS[labels])
-    truth = {**_truth(seed, scene, instances, owners, effects), "labels": labels}
+    truth = {**_truth(seed, scene, instances, owners, effects, along_blade=wide), "labels": labels}
+    if wide:
+        truth.update(_wide_truth(scene, structures))
+    if mix is not None:
+        truth["view_mix"] = mix
     return SynthSample(image=image, instances=instances, truth=truth)
+
+
+def _wide_truth(scene: Scene, structures) -> dict[str, Any]:
+    """What only the wider views record: what the view aimed at, the spare blades on the
+    ground (labelled blades of turbines ``S1``...) and the distractors (never labelled), with
+    their members so their pixels can be drawn again."""
+    return {"view_detail": scene.detail,
+            "spare_blades": [s.to_dict() for s in scene.spares],
+            "distractors": [s.to_dict() for s in structures],
+            "distractor_members": [{"members": np.round(s.members, 4).tolist(),
+                                    "radius": np.round(s.radius, 4).tolist(),
+                                    "foreground": s.foreground} for s in structures]}
 
 
 # ---- turbines -------------------------------------------------------------------------------
@@ -127,9 +233,10 @@ def _mesh_detail(turbine: Turbine, camera: Camera) -> tuple[int, int]:
     return 8, 14
 
 
-def _render_turbines(turbines, scene: Scene, rng, zenith, horizon):
+def _render_turbines(turbines, scene: Scene, rng, zenith, horizon, blade_only: int = 0):
     """Paint every turbine's faces at SUPERSAMPLE x resolution; return (premultiplied colour,
-    coverage) at the output resolution and the supersampled global part map."""
+    coverage) at the output resolution and the supersampled global part map. Of the last
+    ``blade_only`` turbines (spare blades on the ground) only the blades are drawn."""
     cam = scene.camera
     ss = SUPERSAMPLE
     W, H = cam.width_px, cam.height_px
@@ -140,6 +247,9 @@ def _render_turbines(turbines, scene: Scene, rng, zenith, horizon):
     off_v, off_p = 0, 0
     for j, t in enumerate(turbines):
         m = t.mesh(*_mesh_detail(t, cam))
+        if j >= len(turbines) - blade_only:
+            keep = m.face_part < t.n_blades
+            m = Mesh(m.vertices, m.faces[keep], m.face_part[keep])
         verts.append(m.vertices)
         faces.append(m.faces + off_v)
         gparts.append(m.face_part.astype(np.int32) + off_p)
@@ -348,7 +458,29 @@ def _instances(part2: np.ndarray, boxes: np.ndarray, turbines, width: int, heigh
     return Instances(np.array(labels, dtype=object), np.stack(masks)), owners
 
 
-def _truth(seed, scene: Scene, instances: Instances, owners, effects) -> dict[str, Any]:
+def blade_image_angle(turbine: Turbine, camera: Camera, k: int, near: float = 0.5) -> float:
+    """Blade k's image angle φ (hub -> tip, DESIGN.md), from the projection of its axis.
+    With the hub and the tip in front of the camera this is ``image_angle_deg(hub, tip)``;
+    when one of them lies behind it (close-ups), the direction of the axis's projection at
+    its nearest point in front, towards the tip (a straight line projects to a straight line,
+    so it is the same direction wherever both ends are visible)."""
+    hub = turbine.hub_center
+    d = turbine.blade_direction(k)
+    tip = hub + turbine.tip_radius * d
+    zh, zt = ((np.array([hub, tip]) - camera.position) @ camera.forward)
+    if zh > near and zt > near:
+        return camera.image_angle_deg(hub, tip)
+    dz = float(d @ camera.forward)
+    # The stretch of the axis in front of the camera: s with zh + s * dz > near, s in [0, R].
+    s0 = 0.0 if zh > near else (near - zh) / dz if dz > 0 else np.inf
+    if not s0 <= turbine.tip_radius:
+        s0 = turbine.tip_radius  # wholly behind: any direction is as good; keep it defined
+    a = hub + (s0 + 1e-3) * d
+    return camera.image_angle_deg(a, a + 0.01 * d)
+
+
+def _truth(seed, scene: Scene, instances: Instances, owners, effects,
+           along_blade: bool = False) -> dict[str, Any]:
     t, cam = scene.turbine, scene.camera
     W, H = cam.width_px, cam.height_px
     hub = t.hub_center
@@ -358,7 +490,7 @@ def _truth(seed, scene: Scene, instances: Instances, owners, effects) -> dict[st
                   if o["turbine"] == 0 and o["blade"] is not None}
     blades = []
     for k in range(t.n_blades):
-        phi = cam.image_angle_deg(hub, tips[k])
+        phi = blade_image_angle(t, cam, k) if along_blade else cam.image_angle_deg(hub, tips[k])
         theta = phi % 180.0
         tip_uv = uv[k + 1]
         blades.append({
@@ -396,8 +528,9 @@ def _shadows(bg: np.ndarray, scene: Scene) -> np.ndarray:
         return bg
     H, W = bg.shape[:2]
     shadow = np.zeros((H, W), np.float32)
-    for t in (scene.turbine,) + scene.others:
-        m = t.mesh(6, 12)
+    meshes = [t.mesh(6, 12) for t in (scene.turbine,) + scene.others]
+    meshes += [clutter.blade_mesh(t) for t in scene.spares]
+    for m in meshes:
         ground = m.vertices - L[None, :] * (m.vertices[:, 2:3] / L[2])
         uv, z = cam.project(ground)
         tri = uv[m.faces]
@@ -551,15 +684,20 @@ def sample_seed(seed: int, index: int) -> int:
 def render_dataset(out_dir: str | Path, count: int, seed: int, width: int = 640,
                    height: int = 480, view: str | None = None, progress: bool = True,
                    on_image: Callable[[int], None] | None = None,
-                   labels: str = "outline") -> dict[str, Any]:
+                   labels: str = "outline",
+                   view_mix: str | dict[str, float] | None = None) -> dict[str, Any]:
     """Write ``count`` renders to ``out_dir``: images/NNNNN.jpg, instances.json (COCO-compatible,
     RLE masks) and ground_truth.json. Returns a summary dict. Existing files of the same names
-    are replaced; each file is written atomically."""
+    are replaced; each file is written atomically. ``view_mix``: as for ``render_sample`` (its
+    shares are recorded in the parameters; without it the files are as they always were)."""
     if count < 1:
         raise ValueError(f"expected count >= 1, got {count}")
     _check_args(seed, width, height, view)
     if labels not in LABELS:
         raise ValueError(f"expected labels in {tuple(LABELS)}, got {labels!r}")
+    mix = parse_view_mix(view_mix)
+    if mix is not None and view is not None:
+        raise ValueError(f"expected a view or a view mix, got both ({view!r} and {view_mix!r})")
     out = Path(out_dir)
     # Annotations are RLE-encoded image by image (a dataset's masks would not fit in memory).
     images, anns, truth = [], [], {}
@@ -569,7 +707,7 @@ def render_dataset(out_dir: str | Path, count: int, seed: int, width: int = 640,
     def run(step: Callable[[], None]) -> None:
         for i in range(count):
             s = sample_seed(seed, i)
-            smp = render_sample(s, width, height, view, labels=labels)
+            smp = render_sample(s, width, height, view, labels=labels, view_mix=mix)
             name = f"images/{i:05d}.jpg"
             ok, buf = cv2.imencode(".jpg", smp.image, [cv2.IMWRITE_JPEG_QUALITY, 92])
             if not ok:
@@ -595,6 +733,8 @@ def render_dataset(out_dir: str | Path, count: int, seed: int, width: int = 640,
 
     params = {"count": count, "seed": seed, "width": width, "height": height,
               "view": view or "mixed", "labels": labels}
+    if mix is not None:
+        params.update(view="mix", view_mix=mix)
     # The same document as wtcli.masks.instances_document builds, from the encoded annotations.
     body = {"info": {"description": "wtinspect instances"}, "licenses": [], "images": images,
             "annotations": anns, "categories": CATEGORIES, "synth": params}
@@ -608,4 +748,5 @@ def render_dataset(out_dir: str | Path, count: int, seed: int, width: int = 640,
 
 
 __all__ = ["SynthSample", "render_sample", "render_dataset", "sample_seed",
-           "TRUTH_SCHEMA", "TRUTH_VERSION", "LABELS"]
+           "TRUTH_SCHEMA", "TRUTH_VERSION", "LABELS", "ALL_VIEWS", "parse_view_mix", "draw_view",
+           "blade_image_angle"]

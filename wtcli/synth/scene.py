@@ -62,6 +62,10 @@ class Scene:
     camera: Camera
     others: tuple[Turbine, ...]
     env: Environment
+    # The wider views (wtcli.synth.views) only: blades lying on the ground, each a one-blade
+    # Turbine of which only the blade is drawn, and what the view aimed at.
+    spares: tuple[Turbine, ...] = ()
+    detail: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return {"view": self.view, "view_offset_deg": self.view_offset_deg,
@@ -125,7 +129,18 @@ def _sample_fill(rng: np.random.Generator) -> float:
 
 
 def sample_scene(rng: np.random.Generator, width: int, height: int, view: str | None,
-                 rotor_azimuth: float | None = None) -> Scene:
+                 rotor_azimuth: float | None = None,
+                 view_mix: dict[str, float] | None = None) -> Scene:
+    """A scene of ``view``; None draws the view from VIEW_ODDS, or from ``view_mix`` (shares
+    per view, whole-rotor or wider: ``wtcli.synth.render.parse_view_mix``) when given. The
+    wider views come from ``wtcli.synth.views.sample_wide_scene``."""
+    if view is None and view_mix is not None:
+        names = sorted(view_mix)
+        view = _choice(rng, tuple(names), tuple(view_mix[n] for n in names))
+    if view is not None and view not in VIEWS:
+        from wtcli.synth.views import sample_wide_scene
+
+        return sample_wide_scene(rng, width, height, view, rotor_azimuth=rotor_azimuth)
     if view is None:
         view = _choice(rng, tuple(VIEW_ODDS), tuple(VIEW_ODDS.values()))
     turbine = sample_turbine(rng, rotor_azimuth=rotor_azimuth)
@@ -175,8 +190,10 @@ def sample_scene(rng: np.random.Generator, width: int, height: int, view: str | 
                  roll_deg=roll, turbine=turbine, camera=camera, others=tuple(others), env=env)
 
 
-def _sample_others(rng: np.random.Generator, main: Turbine, camera: Camera) -> list[Turbine]:
-    n = int(rng.choice([0, 1, 2, 3, 4, 5], p=[0.3, 0.2, 0.2, 0.15, 0.1, 0.05]))
+def _sample_others(rng: np.random.Generator, main: Turbine, camera: Camera,
+                   n: int | None = None) -> list[Turbine]:
+    if n is None:
+        n = int(rng.choice([0, 1, 2, 3, 4, 5], p=[0.3, 0.2, 0.2, 0.15, 0.1, 0.05]))
     out: list[Turbine] = []
     d_main = float(np.linalg.norm(main.base_xyz[:2] - camera.position[:2]))
     fwd = camera.forward[:2].copy()
