@@ -253,7 +253,7 @@ def _spread_like_a_rotor(azimuths: tuple[float, ...], where: str) -> None:
     """Blades of a rotor are evenly spaced: each gap between neighbours within the tolerance the
     photo path allows (``plan.angles.MAX_SPACING_ERROR_DEG``) of 360/n, else a typo such as
     [90, 90, 210]."""
-    from wtcli.plan.angles import MAX_SPACING_ERROR_DEG
+    from wtcli.pitch.rotor import ROTOR_GAP_TOLERANCE_DEG as MAX_SPACING_ERROR_DEG
 
     n = len(azimuths)
     if n < 2:
