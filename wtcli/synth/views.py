@@ -53,13 +53,20 @@ def _keep_clear(turbine: Turbine, pos: np.ndarray, away_from: np.ndarray) -> np.
 
 def _aim_at_pixel(cam0: Camera, pos: np.ndarray, point: np.ndarray, u: float, v: float,
                   roll: float) -> Camera:
-    """A camera at ``pos`` turned so that ``point`` appears near pixel (u, v) (first order:
-    the aim moves by the pixel offset times the distance over the focal length)."""
-    look = cam0.looking_at(pos, point)
+    """A camera at ``pos``, rolled by ``roll``, turned so that ``point`` appears at pixel
+    (u, v): the aim moves by the pixel error times the distance over the focal length, a few
+    times over (within a pixel or two even at the frame's edges)."""
     dist = float(np.linalg.norm(point - pos))
-    a = (u - cam0.cx) * dist / cam0.fx
-    b = (v - cam0.cy) * dist / cam0.fx
-    return cam0.looking_at(pos, point - a * look.right - b * look.down, roll_deg=roll)
+    target = np.asarray(point, float)
+    cam = cam0.looking_at(pos, target, roll_deg=roll)
+    for _ in range(6):
+        uv, _ = cam.project(point[None])
+        du, dv = uv[0, 0] - u, uv[0, 1] - v
+        if abs(du) + abs(dv) < 0.5:
+            break
+        target = target + (du * cam.right + dv * cam.down) * dist / cam0.fx
+        cam = cam0.looking_at(pos, target, roll_deg=roll)
+    return cam
 
 
 def _angles(turbine: Turbine, pos: np.ndarray) -> tuple[float, float]:
