@@ -417,3 +417,32 @@ def test_wide_views_render_tiny_images_cleanly():
         warnings.simplefilter("error")
         for view in WIDE_VIEWS:
             assert render_sample(1, 33, 47, view=view).image.shape == (47, 33, 3)
+
+
+def test_cut_views_cut_their_part_at_the_named_edge():
+    """A 'cut' frame's nacelle (with the hub) reaches the frame edge its truth names."""
+    checked = 0
+    for seed in range(12):
+        s = render_sample(seed, WW, WH, view="cut", labels="half")
+        d = s.truth["view_detail"]
+        if d["cut"] not in ("nacelle", "hub"):
+            continue
+        nac = [s.instances.masks[i] for i, o in enumerate(s.truth["instances"])
+               if o["turbine"] == 0 and s.instances.labels[i] == "nacelle"]
+        assert nac, seed
+        m = nac[0]
+        edge = {"left": m[:, 0], "right": m[:, -1], "top": m[0], "bottom": m[-1]}[d["edge"]]
+        assert edge.any(), (seed, d)
+        checked += 1
+    assert checked >= 4
+
+
+def test_scene_sampler_takes_the_view_mix():
+    from wtcli.synth.scene import sample_scene
+
+    views = [sample_scene(np.random.default_rng(i), 160, 120, None,
+                          view_mix={"nadir": 0.5, "front": 0.5}).view for i in range(24)]
+    assert set(views) == {"nadir", "front"}
+    plain = sample_scene(np.random.default_rng(3), 160, 120, None)
+    again = sample_scene(np.random.default_rng(3), 160, 120, None, view_mix=None)
+    assert plain.to_dict() == again.to_dict() and plain.spares == () and plain.detail == {}

@@ -261,7 +261,7 @@ def _cut(rng, width, height, rotor_azimuth):
     part = _choice(rng, ("nacelle", "hub", "blade"), (0.4, 0.3, 0.3))
     edge = int(rng.integers(4))  # left, right, top, bottom
     along = float(rng.uniform(0.15, 0.85))
-    inset = float(rng.uniform(-0.06, 0.04))
+    inset = float(rng.uniform(-0.005, 0.03))  # its centre on the edge or just inside
     if part == "nacelle":
         point = t.nacelle_center
     elif part == "hub":
