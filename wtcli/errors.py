@@ -29,6 +29,13 @@ class WtError(Exception):
     exit_code = ExitCode.UNEXPECTED
 
 
+class UsageError(WtError):
+    """The command line does not say enough (e.g. which turbine a photo shows): exit 2, as a
+    wrong option."""
+
+    exit_code = ExitCode.USAGE
+
+
 class InputError(WtError):
     exit_code = ExitCode.INPUT
 

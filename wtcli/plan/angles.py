@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wtcli.errors import InputError, PerceptionError
+from wtcli.errors import InputError, PerceptionError, UsageError
 from wtcli.pitch.rotor import ROTOR_GAP_TOLERANCE_DEG
 from wtcli.plan.config import CameraPose, Mission
 from wtcli.plan.zone import azimuths_from_pitch
@@ -42,7 +42,7 @@ def _owner(mission: Mission, tid: str | None, path: Path, image_name: str | None
             return t.id
     if len(ids) == 1:
         return ids[0]
-    raise InputError(f"{path}: which turbine is this? prefix it with the turbine id "
+    raise UsageError(f"{path}: which turbine is this? prefix it with the turbine id "
                      f"({ids[0]}={path}) or name it in that turbine's 'photo' key")
 
 
