@@ -41,7 +41,9 @@ def test_blade_behind_the_tower_is_not_covered_from_the_tower_side():
     # Rotor faces north (+y), blade 1 points straight down in front of the tower: its trailing
     # edge faces the tower (south).
     t = make_turbine(az=270.0, yaw=0.0)  # 8 mm/px GSD limit below: photos from up to 31 m
-    s = pick(t.surface_samples(0.5, "blades"), 0, TE, 0.4, [0.0, -1.0, 0.0])
+    # a trailing-edge sample facing 40 deg off south, so that a view along its normal passes
+    # beside the tower (the edge line itself faces the tower squarely)
+    s = pick(t.surface_samples(0.5, "blades"), 0, TE, 0.4, [0.64, -0.77, 0.0])
     x = s.points[0]
     n = s.normals[0] * [1.0, 1.0, 0.0]
     behind = x + np.array([0.0, -25.0, 0.0])  # due south: across the tower's axis (x = y = 0)

@@ -118,14 +118,15 @@ def side_coverage(plan, tid="T1"):
 @pytest.mark.parametrize("az, yaw", [(270, 0), (257, 60)])
 def test_blade_down_in_front_of_the_tower_covers_every_side(az, yaw):
     """Blade 1 straight down (and 13 deg off it): its trailing edge faces the tower, the gap is
-    narrower than twice the clearance. Oblique passes plus extra views reach every side; this
-    case used to be refused (trailing edge ~80 %)."""
+    narrower than twice the clearance. Oblique passes plus extra views reach every side above
+    the default min_side_coverage 0.9 (the trailing edge straight down reads ~94.6 %, a few
+    points short of full: the part facing the tower squarely is seen only beyond 60 deg)."""
     t = make_turbine(az=az, yaw=yaw)
     plan = plan_mission(Mission((t,), CAM))  # default min_side_coverage 0.9: not refused
     assert_safe(plan, 3.0)
     sides = side_coverage(plan)
-    assert min(sides["blade1"].values()) >= 0.98, sides["blade1"]
-    assert min(v for d in sides.values() for v in d.values()) >= 0.98, sides
+    assert min(v for d in sides.values() for v in d.values()) >= 0.93, sides
+    assert min(v for b, d in sides.items() if b != "blade1" for v in d.values()) >= 0.98, sides
     r = plan.routes[0]
     assert r.photo[r.component == "T1/blade1/trailing_edge"].sum() > 10
 
@@ -143,7 +144,8 @@ def test_horizontal_blade_covers_every_side_and_the_rest_stays_near_full():
     assert min(sides["blade3"].values()) >= 0.97, sides["blade3"]
     assert plan.summary["predicted_coverage"]["T1"]["blade_average"] >= 0.995
     # Asking for more than the geometry allows is refused, naming the side and what blocks it.
-    with pytest.raises(PlanError, match=r"blade3 trailing_edge.*nacelle"):
+    with pytest.raises(PlanError, match=r"blade\d trailing_edge: predicted coverage .* < "
+                                        r"min_side_coverage 99%.*turn the rotor"):
         plan_mission(Mission((t,), CAM, settings=Settings(min_side_coverage=0.99)))
 
 
@@ -1222,3 +1224,47 @@ def test_turbines_on_top_of_each_other_are_refused_naming_both():
 def test_a_rotor_a_little_uneven_is_accepted():
     m = mission_from_dict(_site({"blade_azimuths_deg": [90, 215, 330]}))
     assert m.turbines[0].azimuths_deg == (90.0, 215.0, 330.0)
+
+
+def test_trailing_edge_coverage_converges_as_the_sampling_refines():
+    """The failing case of issue 40: a blade straight down in front of the tower, whose trailing
+    edge faces it. Sampled by angle, its edge line fell between samples: the plan said 100 %,
+    finer samplings 99.4 and 93.8 %. By arc length per side, with a sample on the edge line,
+    the figure at the planner's sampling holds within 0.5 points at half and a quarter of it."""
+    from wtcli.geometry.coverage import measure_coverage
+    from wtcli.plan.mission import _photos_of
+
+    plan = plan_mission(Mission((make_turbine(az=270.0),), CAM, settings=Settings(min_side_coverage=0.0)))
+    t = plan.turbines[0]
+    pos, rot = _photos_of(t, plan.routes)
+    figs = []
+    for sp in (0.5, 0.25):
+        cov = measure_coverage(t.surface_samples(sp, "blades"), CAM, pos, rot, plan.target_gsd_mm, 60.0)
+        figs.append(cov.by_blade_side()["blade1"]["trailing_edge"])
+    said = plan.summary["predicted_coverage"]["T1"]["by_blade_side"]["blade1"]["trailing_edge"]
+    assert said == pytest.approx(figs[0])
+    assert abs(figs[0] - figs[1]) < 0.005 and figs[0] < 0.99
+
+
+def test_every_blade_side_has_its_middle_line_sampled():
+    t = make_turbine(az=10.0)
+    smp = t.surface_samples(0.5, "blades")
+    d, c, n = t.blade_frame(0)
+    for side, axis in enumerate((c, n, -c, -n)):
+        m = (smp.blade == 0) & (smp.side == side)
+        assert (smp.normals[m] @ axis).max() > 1 - 1e-9  # a sample whose normal is the side's own
+
+
+def test_cli_photo_without_a_turbine_on_a_site_of_two_is_a_usage_error(cli, tmp_path):
+    """The sample site has two turbines: a photo or pitch JSON that names none is a command
+    line that does not say enough (exit 2, with the fix), not a missing file (exit 3)."""
+    from wtcli.jsonio import document, write_json
+    from wtcli.pitch import PITCH_SCHEMA, PITCH_VERSION
+
+    pj = tmp_path / "pitch.json"
+    write_json(pj, document(PITCH_SCHEMA, PITCH_VERSION,
+                            {"images": [_pitch_image(load_mission(SAMPLE).turbine("T2"))]}))
+    r = cli("plan", SAMPLE, pj)
+    assert r.exit_code == 2, r.output
+    assert "which turbine is this? prefix it with the turbine id (T1=" in r.output
+    assert cli("plan", SAMPLE, f"T2={pj}").exit_code == 0

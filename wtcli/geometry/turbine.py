@@ -432,27 +432,28 @@ class Turbine:
         s = s_start + (np.arange(ns) + 0.5) * (s1 - s_start) / ns
         f = (s - s0) / (s1 - s0)
         A, B = self.blade_semi_axes(f)
-        perim = math.pi * (3 * (A + B) - np.sqrt((3 * A + B) * (A + 3 * B)))  # Ramanujan
-        m = max(16, int(math.ceil(perim.max() / spacing)))
-        psi = (np.arange(m) + 0.5) * 2 * math.pi / m
-        S, PSI = np.meshgrid(np.arange(ns), psi, indexing="ij")
+        # Round each section by arc length, side by side: each side (normal within 45 deg of
+        # +c, +n, -c, -n) gets samples as long as its own arc, at most ``spacing`` apart and
+        # an odd number, so that one lies on the side's middle line (the leading and trailing
+        # edge lines themselves). A side's figure then converges as ``spacing`` shrinks; an
+        # even spread in the ellipse's angle put only one or two samples on a thin edge.
+        psi, dl, sides = _section_samples(A, B, spacing)
+        m = psi.shape[1]
+        S = np.repeat(np.arange(ns)[:, None], m, axis=1)
+        PSI = psi
         a_, b_ = A[S], B[S]
         cu, sv = np.cos(PSI), np.sin(PSI)
         pts = (self.hub_center + s[S][..., None] * d + (a_ * cu)[..., None] * c
                + (b_ * sv)[..., None] * n)
         nu, nv = cu / a_, sv / b_
         nrm = _unit(nu[..., None] * c + nv[..., None] * n)
-        # Side from the normal's direction in the section: LE +c, pressure +n, TE -c, suction -n.
-        beta = np.degrees(np.arctan2(nv, nu)) % 360.0
-        side = (((beta + 45.0) % 360.0) // 90.0).astype(np.int8)
-        # Arc length element of the ellipse times span step.
-        dl = np.hypot(a_ * np.sin(PSI), b_ * np.cos(PSI)) * (2 * math.pi / m)
+        side = np.broadcast_to(sides, (ns, m))
         area = dl * (s1 - s_start) / ns
         size = ns * m
         out = {
             "points": pts.reshape(size, 3), "normals": nrm.reshape(size, 3),
             "area": area.reshape(size), "part": np.full(size, k, np.int16),
-            "blade": np.full(size, k, np.int16), "side": side.reshape(size),
+            "blade": np.full(size, k, np.int16), "side": side.reshape(size).astype(np.int8),
             "span": np.repeat(f, m),
         }
         # Where the root runs into another part (its trailing edge into the nacelle's front face,
@@ -678,6 +679,44 @@ def _ellipse_distance(u: np.ndarray, v: np.ndarray, A: np.ndarray, B: np.ndarray
     y = B2 * v / (t + B2)
     out[live] = np.hypot(u - x, v - y)
     return out
+
+
+_SIDE_SAMPLES_MIN = 5  # per side of a section, odd: the side's middle line and two each side
+
+
+def _section_samples(A: np.ndarray, B: np.ndarray, spacing: float
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(psi, dl, side): ``psi`` and ``dl`` (sections, m), the ellipse angles of each section's
+    samples (point A cos psi along the chord, B sin psi along the thickness) and the arc length
+    each stands for; ``side`` (m,) each sample's index in ``BLADE_SIDES``: the side whose
+    normal is within 45 deg of +chord (leading edge), +thickness, -chord, -thickness. Each
+    side is cut into cells of equal arc length, as many in every section (the longest such arc
+    at ``spacing``, odd, at least ``_SIDE_SAMPLES_MIN``), a sample at each cell's middle."""
+    A, B = np.asarray(A, float), np.asarray(B, float)
+    p1 = np.arctan2(B, A)  # where the normal is at 45 deg: tan(psi) = (B / A) tan(45 deg)
+    bounds = np.stack([-p1, p1, math.pi - p1, math.pi + p1, 2 * math.pi - p1], axis=1)
+    fine = 256
+    u = np.linspace(0.0, 1.0, fine + 1)
+    per_side = []
+    for j in range(4):
+        lo, hi = bounds[:, j], bounds[:, j + 1]
+        grid = lo[:, None] + (hi - lo)[:, None] * u[None, :]  # (sections, fine + 1)
+        speed = np.hypot(A[:, None] * np.sin(grid), B[:, None] * np.cos(grid))
+        cum = np.concatenate([np.zeros((len(A), 1)),
+                              np.cumsum(0.5 * (speed[:, 1:] + speed[:, :-1]) * np.diff(grid, axis=1),
+                                        axis=1)], axis=1)
+        per_side.append((grid, cum))
+    psi, dl, side = [], [], []
+    for j, (grid, cum) in enumerate(per_side):
+        n = max(_SIDE_SAMPLES_MIN, int(math.ceil(float(cum[:, -1].max()) / spacing)))
+        n += 1 - n % 2  # odd: one sample on the middle line
+        total = cum[:, -1:]
+        target = (np.arange(n) + 0.5)[None, :] / n * total  # cell middles by arc length
+        psi.append(np.stack([np.interp(target[i], cum[i], grid[i]) for i in range(len(A))]))
+        dl.append(np.repeat(total / n, n, axis=1))
+        side.append(np.full(n, j, np.int8))
+    return (np.concatenate(psi, axis=1) % (2 * math.pi), np.concatenate(dl, axis=1),
+            np.concatenate(side))
 
 
 def _tube_faces(rings: int, around: int, cap_end: int | None) -> np.ndarray:
