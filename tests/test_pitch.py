@@ -713,3 +713,36 @@ def test_a_candidate_mostly_inside_a_counted_blade_is_not_admitted():
     hub = np.asarray(res.hub_px)
     assert [c for c, _ in admit_low_score_blades([cand], blades, measured, hub, 3)] == [cand]
     assert admit_low_score_blades([cand], blades + [fat_c], measured, hub, 3) == []
+
+
+# ---- the chain for one photo ----------------------------------------------------------------------
+def test_photo_to_pitch_counts_and_the_one_short_rotor(tmp_path, monkeypatch):
+    """``wtcli.chain.photo_to_pitch`` (segmenter stood in by known masks): the photo's record and
+    contours come through; a rotor one blade short is a count error unless ``one_short_ok``;
+    a blade scoring below 0.5 is not counted unless it completes the rotor."""
+    from wtcli.chain import photo_to_pitch
+    from wtcli.segment import infer
+
+    h, w = 240, 320
+    cv2.imwrite(str(tmp_path / "p.jpg"), np.full((h, w, 3), 128, np.uint8))
+    two = rotor(h, w, [90, 210])
+    monkeypatch.setattr(infer, "segment_image", lambda image, **kw: two)
+    found = photo_to_pitch(tmp_path / "p.jpg", 3)
+    assert found.result is None and "found 2 blades" in found.error
+    assert found.input.image["file_name"] == "p.jpg" and found.input.image["width"] == w
+    assert found.input.background_candidates == (tmp_path / "p.jpg",)
+    short = photo_to_pitch(tmp_path / "p.jpg", 3, one_short_ok=True)
+    assert short.error is None and sorted(round(b.phi_deg) for b in short.result.blades) == [90, 210]
+    # Two blades of a 2-blade rotor is right; one short of it is not "one short" (n < 3).
+    assert photo_to_pitch(tmp_path / "p.jpg", 2).error is None
+    one = rotor(h, w, [90])
+    monkeypatch.setattr(infer, "segment_image", lambda image, **kw: one)
+    assert "found 1 blade" in photo_to_pitch(tmp_path / "p.jpg", 2, one_short_ok=True).error
+
+    low = rotor(h, w, [90, 210, 330])
+    low = Instances(low.labels, low.masks, np.array([0.9, 0.9, 0.3, 0.9]))
+    monkeypatch.setattr(infer, "segment_image", lambda image, **kw: low)
+    res = photo_to_pitch(tmp_path / "p.jpg", 3).result
+    assert len(res.blades) == 3 and [b.admitted_low_score for b in res.blades] == [False, False, True]
+    no_floor = photo_to_pitch(tmp_path / "p.jpg", 3, candidate_floor=None)
+    assert "found 2 blades" in no_floor.error

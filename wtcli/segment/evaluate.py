@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from wtcli.masks import LABELS, Instances
+from wtcli.segment.defaults import DEFAULT_SCORE_THRESHOLD
 
 
 def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
@@ -49,7 +50,7 @@ class Evaluator:
     """``add(pred, truth)`` per image, then ``summary()``. ``pred`` should keep low-score
     detections (score_threshold ~0) for AP; IoU and counts use ``score_threshold``."""
 
-    def __init__(self, score_threshold: float = 0.5):
+    def __init__(self, score_threshold: float = DEFAULT_SCORE_THRESHOLD):
         self.t = score_threshold
         self.ious: dict[str, list[float]] = {l: [] for l in LABELS}
         self.det: dict[str, list[tuple[float, bool]]] = {l: [] for l in LABELS}

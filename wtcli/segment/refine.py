@@ -27,6 +27,7 @@ from torch import nn
 
 from wtcli.errors import ModelError
 from wtcli.masks import LABELS, Instances
+from wtcli.segment.defaults import DEFAULT_MAX_SIZE
 from wtcli.segment.model import MODELS_DIR, resolve_precision
 
 BAND = 2  # px each side of the boundary decided again
@@ -49,7 +50,7 @@ ARCH = "wtrefine-mlp-local"
 DEFAULT_REFINER = "wtseg-refine.pt"
 # Photos larger than this (longer side) are refined at this size, as ``predict`` segments
 # them: the refiner was trained on renders up to 1280 px, where an edge is a pixel or two wide.
-REFINE_MAX_SIZE = 1600
+REFINE_MAX_SIZE = DEFAULT_MAX_SIZE
 # A pixel outside the mask joins it at refiner probability ADD_AT; one inside leaves it only
 # below KEEP_AT of its class. Removing is where renders and real photos disagree: the photos'
 # hand-drawn masks are more generous at the edges than our renders' labels. With the first
