@@ -60,6 +60,11 @@ class _Boundary(TyperGroup):
                 err_console.print(traceback.format_exc(), markup=False)
             err_console.print(f"[red]error:[/red] {one_line(str(e))}", markup=True, soft_wrap=True)
             ctx.exit(int(e.exit_code))
+        except BrokenPipeError:
+            # The reader of stdout went away (``wtinspect ... | head``): nothing left to say.
+            # Further writes at exit go to /dev/null instead of raising again.
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            ctx.exit(ExitCode.OK)
         except OSError as e:
             if e.filename is None:
                 self._unexpected(ctx, e)

@@ -1,0 +1,457 @@
+"""Hostile but realistic inputs and faults, each run through the command line as a user would.
+
+Every case builds its input here (tiny images, hand-edited JSON and YAML, blocked or full
+output locations, kills between write and rename) and asserts three things: the exit code
+``docs/exit-codes.md`` documents, one message line on stderr naming the file, and the state of
+the output folder afterwards (nothing stale, nothing half-written, nothing lost). No case may
+end in the catch-all exit 1. The model runs only where the case is about segmenting (random
+weights, 64 x 48 photos, no refiner, zoom or flip).
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "sample_images"
+IS_ROOT = hasattr(os, "geteuid") and os.geteuid() == 0
+FAST = ("--no-refine", "--no-zoom", "--no-flip", "--score-threshold", "0.0")
+
+
+def one_error_line(result, code: int, *names: str) -> str:
+    """The command ended with ``code`` and one stderr line (after any table or progress
+    output) starting "error:" and naming every one of ``names``; returns that line."""
+    assert result.exit_code == code, (result.exit_code, result.stderr[-800:])
+    assert "unexpected error" not in result.stderr and "Traceback" not in result.stderr
+    lines = [ln for ln in result.stderr.splitlines() if ln.startswith("error:")]
+    assert len(lines) == 1, result.stderr[-800:]
+    assert result.stderr.rstrip("\n").endswith(lines[0])  # the last thing said, on one line
+    for n in names:
+        assert str(n) in lines[0], (n, lines[0])
+    return lines[0]
+
+
+def temp_leftovers(folder: Path) -> list[Path]:
+    return [p for p in folder.rglob(".*") if p.is_file()]
+
+
+# ---- fixtures --------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def weights(tmp_path_factory) -> Path:
+    from wtcli.segment.model import build_model, save_weights
+
+    torch.manual_seed(0)
+    path = tmp_path_factory.mktemp("w") / "random.pt"
+    save_weights(build_model(), path, meta={"note": "random"})
+    return path
+
+
+@pytest.fixture(scope="module")
+def nan_weights(tmp_path_factory) -> Path:
+    from wtcli.segment.model import build_model, save_weights
+
+    torch.manual_seed(0)
+    model = build_model()
+    with torch.no_grad():
+        next(model.parameters()).view(-1)[0] = float("nan")
+    path = tmp_path_factory.mktemp("w") / "nan.pt"
+    save_weights(model, path)
+    return path
+
+
+def _photo(path: Path, seed: int = 0, h: int = 48, w: int = 64) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), np.random.default_rng(seed).integers(0, 255, (h, w, 3), dtype=np.uint8))
+    return path
+
+
+@pytest.fixture
+def photos(tmp_path) -> Path:
+    d = tmp_path / "photos"
+    _photo(d / "a.png", 1)
+    _photo(d / "b.jpg", 2)
+    return d
+
+
+@pytest.fixture(scope="module")
+def instances_doc() -> dict:
+    return json.loads((SAMPLE / "instances.json").read_text())
+
+
+def _write(path: Path, doc) -> Path:
+    path.write_text(json.dumps(doc))
+    return path
+
+
+# ---- outputs: blocked, read-only, full, killed -------------------------------------------------
+def test_segment_out_blocked_fails_before_the_model(cli, photos, tmp_path):
+    # a file where the folder should be: exit 3 at once; the weights are not even looked at
+    # (a missing weights file would otherwise give exit 7)
+    blocker = tmp_path / "blocker"
+    blocker.write_text("x")
+    r = cli("segment", photos, "--out", blocker / "out", "--model", tmp_path / "none.pt")
+    one_error_line(r, 3, blocker)
+    r = cli("segment", photos, "--out", blocker, "--model", tmp_path / "none.pt")
+    one_error_line(r, 3, blocker)
+    assert blocker.read_text() == "x"
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs /proc")
+def test_read_only_location_fails_before_the_work(cli, photos, tmp_path):
+    ro = Path("/proc/wtinspect-out")  # no process may create anything there, root included
+    one_error_line(cli("segment", photos, "--out", ro, "--model", tmp_path / "none.pt"), 3, ro)
+    one_error_line(cli("synth", ro, "--count", "1"), 3, ro)
+    one_error_line(cli("contours", SAMPLE / "instances.json", "--out", ro / "c.json"), 3, ro)
+    one_error_line(cli("pitch", SAMPLE / "instances.json", "--out", ro / "p.json"), 3, ro)
+    t0 = time.monotonic()
+    one_error_line(cli("plan", SAMPLE / "turbines.yaml", "--out", ro / "p.json"), 3, ro)
+    assert time.monotonic() - t0 < 5  # refused before planning
+    one_error_line(cli("train", "--out", ro, "--iterations", "1"), 3, ro)
+    one_error_line(cli("train-refiner", "--out", ro), 3, ro)
+
+
+def test_out_is_a_folder_or_under_a_file(cli, tmp_path):
+    folder = tmp_path / "d"
+    folder.mkdir()
+    one_error_line(cli("contours", SAMPLE / "instances.json", "--out", folder), 3, folder)
+    f = tmp_path / "f"
+    f.write_text("")
+    one_error_line(cli("synth", f, "--count", "1"), 3, f)
+    one_error_line(cli("plan", SAMPLE / "turbines.yaml", "--out", f / "p.json"), 3, f)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d", "f"] and not any(folder.iterdir())
+
+
+def test_disk_full_names_each_photo_and_leaves_no_temporaries(cli, photos, weights, tmp_path,
+                                                              monkeypatch):
+    out = tmp_path / "out"
+    real_replace = os.replace
+
+    def full(src, dst, *a, **k):  # the disk fills up when the overlays are written
+        if str(dst).endswith(".png") and "overlay" in str(dst):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real_replace(src, dst, *a, **k)
+
+    monkeypatch.setattr("wtcli.jsonio.os.replace", full)
+    r = cli("segment", photos, "--out", out, "--model", weights, *FAST)
+    assert r.exit_code == 9, r.stderr[-500:]
+    report = json.loads((out / "report.json").read_text())
+    errors = {im["file"]: im["error"] for im in report["images"]}
+    for name in ("a", "b"):
+        err = errors[f"{name}.{'png' if name == 'a' else 'jpg'}"]
+        assert f"overlay/{name}.png: cannot write (No space left on device)" in err, err
+    assert temp_leftovers(out) == []
+    assert not (out / "instances.json").exists() and report["instances"] is None
+
+
+def test_resume_removes_temporaries_of_a_kill_and_redoes_a_damaged_photo(cli, photos, weights,
+                                                                         tmp_path):
+    out = tmp_path / "out"
+    assert cli("segment", photos, "--out", out, "--model", weights, *FAST).exit_code == 0
+    # SIGKILL between write and rename leaves .NAME.XXXXXXXX beside the file
+    left = [out / "overlay" / ".a.png.k2j4_x9q", out / "instances" / ".b.json.abcd1234",
+            out / ".report.json.zz11yy22"]
+    for p in left:
+        p.write_bytes(b"half")
+    keep = out / "overlay" / ".notes.txt"  # a hidden file of the user's: not ours, kept
+    keep.write_text("mine")
+    (out / "instances" / "a.json").write_text('{"images": [')  # damaged: redo it, do not drop it
+    r = cli("segment", photos, "--out", out, "--model", weights, "--resume", *FAST)
+    assert r.exit_code == 0, r.stderr[-500:]
+    assert temp_leftovers(out) == [keep]
+    report = json.loads((out / "report.json").read_text())
+    assert {im["file"]: im["status"] for im in report["images"]} == {"a.png": "ok", "b.jpg": "skipped"}
+    files = {im["file_name"] for im in json.loads((out / "instances.json").read_text())["images"]}
+    assert files == {"a.png", "b.jpg"}
+
+
+def test_rerun_where_every_photo_fails_leaves_no_stale_instances(cli, photos, weights, tmp_path):
+    out = tmp_path / "out"
+    assert cli("segment", photos, "--out", out, "--model", weights, *FAST).exit_code == 0
+    assert (out / "instances.json").is_file()
+    for p in photos.iterdir():
+        p.write_bytes(b"not an image any more")
+    r = cli("segment", photos, "--out", out, "--model", weights, *FAST)
+    assert r.exit_code == 9
+    report = json.loads((out / "report.json").read_text())
+    assert report["instances"] is None and report["n_failed"] == 2
+    assert not (out / "instances.json").exists()  # contours cannot read the old run's data
+
+
+# ---- unreadable and odd inputs -----------------------------------------------------------------
+def test_broken_and_looping_links_are_reported_not_skipped(cli, photos, weights, tmp_path):
+    (photos / "gone.jpg").symlink_to(photos / "missing.jpg")
+    (photos / "loop.png").symlink_to(photos / "loop.png")
+    out = tmp_path / "out"
+    r = cli("segment", photos, "--out", out, "--model", weights, *FAST)
+    assert r.exit_code == 9, r.stderr[-500:]
+    report = {im["file"]: im for im in json.loads((out / "report.json").read_text())["images"]}
+    assert {f: im["status"] for f, im in report.items()} == {
+        "a.png": "ok", "b.jpg": "ok", "gone.jpg": "error", "loop.png": "error"}
+    assert "gone.jpg: broken symbolic link" in report["gone.jpg"]["error"]
+    assert "loop.png: cannot read (Too many levels of symbolic links)" in report["loop.png"]["error"]
+    one_error_line(cli("segment", photos / "gone.jpg", "--out", out), 3, "gone.jpg")
+
+
+@pytest.mark.skipif(IS_ROOT, reason="permissions do not bind root")
+def test_unreadable_photo_and_folders_exit_3(cli, photos, weights, tmp_path):
+    out = tmp_path / "out"
+    (photos / "a.png").chmod(0)
+    r = cli("segment", photos / "a.png", "--out", out, "--model", weights, *FAST)
+    one_error_line(r, 3, photos / "a.png")
+    (photos / "a.png").chmod(0o644)
+    for mode in (0, 0o600):  # no permission at all; read but no execute
+        photos.chmod(mode)
+        try:
+            one_error_line(cli("segment", photos, "--out", out, "--model", weights), 3, photos)
+        finally:
+            photos.chmod(0o755)
+
+
+def test_unreadable_photo_and_folder_exit_3_simulated(cli, photos, weights, tmp_path, monkeypatch):
+    # The same cases under root, which permissions do not stop: the OS answers EACCES.
+    out = tmp_path / "out"
+    real_fromfile, real_iterdir = np.fromfile, Path.iterdir
+
+    def fromfile(f, *a, **k):
+        if str(f).endswith("a.png"):
+            raise PermissionError(errno.EACCES, "Permission denied", str(f))
+        return real_fromfile(f, *a, **k)
+
+    def iterdir(self):
+        if self == photos:
+            raise PermissionError(errno.EACCES, "Permission denied", str(self))
+        return real_iterdir(self)
+
+    monkeypatch.setattr("wtcli.segment.batch.np.fromfile", fromfile)
+    r = cli("segment", photos / "a.png", "--out", out, "--model", weights, *FAST)
+    line = one_error_line(r, 3, photos / "a.png")
+    assert "Permission denied" in line
+    monkeypatch.setattr(Path, "iterdir", iterdir)
+    line = one_error_line(cli("segment", photos, "--out", out, "--model", weights), 3, photos)
+    assert "cannot list the folder (Permission denied)" in line
+
+
+def test_tiny_and_huge_photos_are_named(cli, weights, tmp_path):
+    one = _photo(tmp_path / "one.png", h=1, w=1)
+    one_error_line(cli("segment", one, "--out", tmp_path / "o", "--model", weights, *FAST), 3, one)
+    # a 100000 x 100000 PNG header on a few bytes: refused before decoding, within a second
+    import struct
+    import zlib
+
+    ihdr = struct.pack(">IIBBBBB", 100_000, 100_000, 8, 2, 0, 0, 0)
+    bomb = tmp_path / "bomb.png"
+    bomb.write_bytes(b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + b"IHDR" + ihdr
+                     + struct.pack(">I", zlib.crc32(b"IHDR" + ihdr)) + bytes(64))
+    line = one_error_line(cli("segment", bomb, "--out", tmp_path / "o", "--model", weights, *FAST),
+                          3, bomb)
+    assert "100000x100000" in line and "200,000,000" in line
+
+
+def test_nan_weights_are_refused_at_load(cli, photos, nan_weights, tmp_path):
+    out = tmp_path / "out"
+    line = one_error_line(cli("segment", photos, "--out", out, "--model", nan_weights), 7, nan_weights)
+    assert "NaN or infinite" in line
+    assert not (out / "instances.json").exists() and not (out / "report.json").exists()
+
+
+def test_code_carrying_weights_message_is_ours(cli, photos, tmp_path):
+    class Evil:
+        def __reduce__(self):
+            return (os.system, ("echo owned",))
+
+    evil = tmp_path / "evil.pt"
+    torch.save({"state_dict": Evil()}, evil)
+    line = one_error_line(cli("segment", photos, "--out", tmp_path / "o", "--model", evil), 7, evil)
+    assert "could run code" in line and "weights_only" not in line and "two options" not in line
+
+
+# ---- instances JSON: versions, numbers, sizes --------------------------------------------------
+def _edited(doc: dict, edit) -> dict:
+    d = json.loads(json.dumps(doc))
+    edit(d)
+    return d
+
+
+INSTANCES_CASES = {
+    "version99": (lambda d: d.update(schema_version=99), "schema_version 99"),
+    "version0": (lambda d: d.update(schema_version=0), "schema_version"),
+    "other_schema": (lambda d: d.update(schema="wtinspect.plan"), "got schema 'wtinspect.plan'"),
+    "nan_score": (lambda d: d["annotations"][0].update(score=float("nan")), "NaN is not a finite"),
+    "inf_bbox": (lambda d: d["annotations"][0]["bbox"].__setitem__(0, float("inf")),
+                 "Infinity is not a finite"),
+    "score_2": (lambda d: d["annotations"][0].update(score=2), "score: expected a number in [0, 1], got 2"),
+    "negative_width": (lambda d: d["annotations"][0]["bbox"].__setitem__(2, -5), "got -5"),
+    "short_bbox": (lambda d: d["annotations"][0].update(bbox=[1, 2]),
+                   "bbox: expected [x, y, width, height], got [1, 2]"),
+    "huge_image": (lambda d: d["images"][0].update(width=200_000, height=200_000),
+                   "200000x200000 is 40,000,000,000 pixels"),
+    "zero_width": (lambda d: d["images"][0].update(width=0), "width: expected an integer >= 1, got 0"),
+    "negative_rle": (lambda d: d["annotations"][0]["segmentation"]["counts"].__setitem__(1, -7),
+                     "counts[1]: expected an integer in [0, 307200], got -7"),
+    "nan_polygon": (lambda d: d["annotations"][0].update(segmentation=[[1, 2, 30, 2, 30, "x"]]),
+                    "got 'x'"),
+    "far_polygon": (lambda d: d["annotations"][0].update(segmentation=[[1, 2, 1e12, 2, 30, 40]]),
+                    "got 1000000000000.0"),
+    "list_image_id": (lambda d: d["annotations"][0].update(image_id=[1]), "got [1]"),
+    "category_9": (lambda d: d["annotations"][0].update(category_id=9), "category_id"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(INSTANCES_CASES))
+@pytest.mark.parametrize("command", ["contours", "pitch"])
+def test_hostile_instances_json(cli, instances_doc, tmp_path, case, command):
+    edit, says = INSTANCES_CASES[case]
+    src = _write(tmp_path / f"{case}.json", _edited(instances_doc, edit))
+    # (json.dumps writes float("nan") as NaN and float("inf") as Infinity, as some tools do)
+    out = tmp_path / "out.json"
+    line = one_error_line(cli(command, src, "--out", out), 3, src)
+    assert says in line, line
+    assert len(line) < 400 and not out.exists()
+
+
+def test_number_past_float_range_and_deep_nesting(cli, instances_doc, tmp_path):
+    src = _write(tmp_path / "big.json", instances_doc)
+    src.write_text(src.read_text().replace('"score": 1.0', '"score": 1e400', 1))
+    assert "1e400 is not a finite number" in one_error_line(cli("contours", src), 3, src)
+    deep = tmp_path / "deep.json"
+    deep.write_text("[" * 100_000 + "]" * 100_000)
+    one_error_line(cli("contours", deep), 3, deep)
+
+
+# ---- YAML ------------------------------------------------------------------------------------
+def _yaml(tmp_path: Path, name: str, text: str) -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+BOMB = "".join(f"{c}: &{c} [" + ", ".join([f"*{p}"] * 9 if p else ['"lol"'] * 9) + "]\n"
+               for p, c in zip([None, *"abcdefgh"], "abcdefghi"))
+
+
+def test_alias_bomb_refused_within_1_s_and_200_mb(tmp_path):
+    from wtcli.errors import ConfigError
+    from wtcli.yamlcheck import load_yaml
+
+    for where in ("fleet:\n  uavs: *i\n", "turbines:\n  - id: T1\n    blade_azimuths_deg: *i\n"):
+        bomb = _yaml(tmp_path, "bomb.yaml", BOMB + where)
+        assert len(bomb.read_bytes()) < 1500  # ~1 KB expanding to 9**9 = 387 million strings
+        # The whole process, interpreter and imports included, under a 2 GiB address-space cap
+        # Peak RSS from VmHWM, which starts afresh at exec (ru_maxrss keeps pytest's peak).
+        code = ("import resource, sys, time\n"
+                "resource.setrlimit(resource.RLIMIT_AS, (2 << 30, 2 << 30))\n"
+                "from wtcli.cli import main\n"
+                "t0 = time.monotonic()\n"
+                "try:\n"
+                f"    main(['plan', {str(bomb)!r}, '--out', {str(tmp_path / 'p.json')!r}])\n"
+                "except SystemExit as e:\n"
+                "    rc = e.code\n"
+                "hwm = [l for l in open('/proc/self/status') if l.startswith('VmHWM')][0]\n"
+                "print(rc, time.monotonic() - t0, int(hwm.split()[1]) // 1024)\n")
+        run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             cwd=ROOT, timeout=120)
+        rc, seconds, peak_mb = run.stdout.split()
+        assert int(rc) == 4, run.stderr
+        assert "aliases expand to over 100,000 values" in run.stderr
+        assert float(seconds) < 1.0 and int(peak_mb) < 200, (seconds, peak_mb)
+        assert not (tmp_path / "p.json").exists()
+    # and in the loading itself, measured by tracemalloc
+    import tracemalloc
+
+    tracemalloc.start()
+    t0 = time.monotonic()
+    with pytest.raises(ConfigError, match="alias bomb"):
+        load_yaml(bomb)
+    took = time.monotonic() - t0
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert took < 1.0 and peak < 20e6, (took, peak)
+
+
+def test_yaml_duplicate_keys_and_self_reference(cli, tmp_path):
+    text = (SAMPLE / "turbines.yaml").read_text()
+    dup = _yaml(tmp_path, "dup.yaml", text + "turbines:\n  - id: T9\n    position: [0, 0, 0]\n")
+    line = one_error_line(cli("plan", dup), 4, dup)
+    assert "duplicate key 'turbines'" in line and "first given on line" in line
+    loop = _yaml(tmp_path, "loop.yaml", "mission: &m {x: *m}\n")
+    assert "refers to the value it is part of" in one_error_line(cli("plan", loop), 4, loop)
+
+
+def test_yaml_value_in_brackets_is_shown(cli, tmp_path):
+    text = (SAMPLE / "turbines.yaml").read_text().replace("position: [0.0, 0.0, 0.0]",
+                                                           "position: [.nan, 0, 0]")
+    bad = _yaml(tmp_path, "nan.yaml", text)
+    line = one_error_line(cli("plan", bad), 4, bad.name)
+    assert line.endswith("[nan, 0, 0]"), line  # not swallowed as console markup
+
+
+def test_plan_options(cli, tmp_path):
+    line = one_error_line(cli("plan", SAMPLE / "turbines.yaml", "--camera-pose", "inf,0,0,0,0,80"),
+                          4, "--camera-pose")
+    assert "'inf,0,0,0,0,80'" in line
+    inst = SAMPLE / "instances.json"
+    line = one_error_line(cli("plan", SAMPLE / "turbines.yaml", f"T9={inst}"), 3, f"T9={inst}")
+    assert "no turbine 'T9'" in line and "T1, T2" in line
+
+
+# ---- plan files ------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def plan_doc(tmp_path_factory) -> dict:
+    from wtcli.cli import app
+    from typer.testing import CliRunner
+
+    out = tmp_path_factory.mktemp("plan") / "plan.json"
+    r = CliRunner().invoke(app, ["plan", str(SAMPLE / "turbines.yaml"), "--out", str(out)])
+    assert r.exit_code == 0, r.stderr
+    return json.loads(out.read_text())
+
+
+PLAN_CASES = {
+    "version2": (lambda d: d.update(schema_version=2), "schema_version 2"),
+    "safe_distance_0": (lambda d: d.update(safe_distance_m=0), "safe_distance_m: expected"),
+    "hub_1e300": (lambda d: d["turbines"][0].update(hub_height=1e300),
+                  "turbines[0].hub_height: expected a number in [1, 1000], got 1e+300"),
+    "speed_negative": (lambda d: d["routes"][0]["waypoints"][3].update(speed=-2),
+                       "routes[0].waypoints[3].speed"),
+    "pos_text": (lambda d: d["routes"][0]["waypoints"][3].update(pos="x"), "invalid plan"),
+    "no_routes": (lambda d: d.pop("routes"), "missing key 'routes'"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(PLAN_CASES))
+def test_hostile_plan_file(cli, plan_doc, tmp_path, case):
+    edit, says = PLAN_CASES[case]
+    src = _write(tmp_path / f"{case}.json", _edited(plan_doc, edit))
+    out = tmp_path / "report.json"
+    line = one_error_line(cli("fly", src, "--scenario", "tiny", "--out", out), 3, src)
+    assert says in line, line
+    assert not out.exists()
+
+
+def test_plan_file_with_nan_is_refused(cli, plan_doc, tmp_path):
+    src = _write(tmp_path / "nan.json", plan_doc)
+    src.write_text(src.read_text().replace('"safe_distance_m": 3.0', '"safe_distance_m": NaN'))
+    assert "NaN" in one_error_line(cli("fly", src, "--scenario", "tiny"), 3, src)
+
+
+# ---- train -----------------------------------------------------------------------------------
+def test_train_options_and_damaged_checkpoint(cli, tmp_path):
+    one_error_line(cli("train", "--sizes", "abc", "--out", tmp_path / "r"), 4, "--sizes")
+    run = tmp_path / "run"
+    run.mkdir()
+    torch.save({"arch": "x"}, run / "last.ckpt")  # an edited checkpoint: no weights, no step
+    line = one_error_line(cli("train", "--out", run, "--resume", "--iterations", "1",
+                              "--device", "cpu"), 7, run / "last.ckpt")
+    assert "state_dict" in line
