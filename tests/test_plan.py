@@ -1268,3 +1268,17 @@ def test_cli_photo_without_a_turbine_on_a_site_of_two_is_a_usage_error(cli, tmp_
     assert r.exit_code == 2, r.output
     assert "which turbine is this? prefix it with the turbine id (T1=" in r.output
     assert cli("plan", SAMPLE, f"T2={pj}").exit_code == 0
+
+
+def test_blade_chords_from_the_yaml_reach_the_model_and_its_clearance():
+    wide = mission_from_dict(_site({"blade": {"root_chord_m": 3.0, "max_chord_m": 5.5,
+                                              "tip_chord_m": 0.8}})).turbines[0]
+    plain = mission_from_dict(_site({})).turbines[0]
+    assert (wide.blade_root_chord, wide.blade_max_chord, wide.blade_tip_chord) == (3.0, 5.5, 0.8)
+    d, c, n = wide.blade_frame(0)
+    s = wide.blade_root_offset + 0.2 * (wide.tip_radius - wide.blade_root_offset)
+    p = wide.hub_center + s * d + 4.0 * c  # 4 m out along the chord at the widest section
+    assert wide.clearance(p[None])[0] == pytest.approx(4.0 - 5.5 / 2, abs=0.05)
+    assert plain.clearance(p[None])[0] > wide.clearance(p[None])[0] + 0.5
+    with pytest.raises(ConfigError, match=r"turbines\[0\]\.blade: unknown key 'max_chord'"):
+        mission_from_dict(_site({"blade": {"max_chord": 5.5}}))

@@ -50,10 +50,11 @@ MISSION_KEYS = ("safe_distance_m", "tracking_margin_m", "target_gsd_mm", "overla
                 "allow_coarser_gsd")
 TURBINE_KEYS = ("id", "position", "lat", "lon", "alt", "hub_height_m", "rotor_diameter_m",
                 "blades", "yaw_deg", "blade_azimuths_deg", "rotor_azimuth_deg", "blade_pitch_deg",
-                "tower", "nacelle", "hub_radius_m", "overhang_m", "blade_tips", "photo",
+                "tower", "nacelle", "blade", "hub_radius_m", "overhang_m", "blade_tips", "photo",
                 "camera_pose")
 TOWER_KEYS = ("base_radius_m", "top_radius_m")
 NACELLE_KEYS = ("length_m", "width_m", "height_m")
+BLADE_KEYS = ("root_chord_m", "max_chord_m", "tip_chord_m")
 POSE_KEYS = ("position", "look_at", "roll_deg")
 # Where a point of a site may be, in ENU metres from the site origin: a real site is a few km
 # across (and exports are checked for sites of 10 km); beyond, a position is a typo or in
@@ -414,6 +415,13 @@ def _turbine(td: Any, w: str, origin: dict | None, base_dir: Path) -> tuple[Turb
         kw["nacelle_length"] = number(nm, "length_m", nw, 1, 40, default=None)
         kw["nacelle_width"] = number(nm, "width_m", nw, 0.5, 20, default=None)
         kw["nacelle_height"] = number(nm, "height_m", nw, 0.5, 20, default=None)
+    if td.get("blade") is not None:
+        bw = f"{w}.blade"
+        bm = need_mapping(td["blade"], bw)
+        check_keys(bm, BLADE_KEYS, bw)
+        kw["blade_root_chord"] = number(bm, "root_chord_m", bw, 0.1, 15, default=None)
+        kw["blade_max_chord"] = number(bm, "max_chord_m", bw, 0.1, 15, default=None)
+        kw["blade_tip_chord"] = number(bm, "tip_chord_m", bw, 0.05, 15, default=None)
     kw["hub_radius"] = number(td, "hub_radius_m", w, 0.2, 10, default=None)
     kw["overhang"] = number(td, "overhang_m", w, 0, 30, default=None)
 
