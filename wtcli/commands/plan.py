@@ -59,8 +59,9 @@ def register(app: typer.Typer) -> None:
                                          "assumes a Y stop; reported, never refused)."),
         camera_pose: Optional[str] = typer.Option(
             None, "--camera-pose", metavar="X,Y,Z,TX,TY,TZ[,ROLL]",
-            help="Where the photo was taken from and the point it looked at (ENU m); default: at "
-                 "S_p looking at the rotor centre."),
+            help="Where the photo was taken from and the point it looked at (ENU m); default: "
+                 "the photo's own GPS and gimbal tags where it has them (docs/photo-pose.md), "
+                 "else at S_p looking at the rotor centre."),
         json_out: bool = typer.Option(False, "--json", help="Print the plan JSON on stdout."),
         jobs: Optional[int] = typer.Option(
             None, "--jobs", "-j", min=1,
