@@ -30,10 +30,13 @@ IS_ROOT = hasattr(os, "geteuid") and os.geteuid() == 0
 FAST = ("--no-refine", "--no-zoom", "--no-flip", "--score-threshold", "0.0")
 
 
-def one_error_line(result, code: int, *names: str) -> str:
+def one_error_line(result, code: int, *names: str, alone: bool = False) -> str:
     """The command ended with ``code`` and one stderr line (after any table or progress
-    output) starting "error:" and naming every one of ``names``; returns that line."""
+    output; with ``alone``, nothing else at all) starting "error:" and naming every one of
+    ``names``; returns that line."""
     assert result.exit_code == code, (result.exit_code, result.stderr[-800:])
+    if alone:
+        assert result.stderr.count("\n") == 1, result.stderr[-800:]
     assert "unexpected error" not in result.stderr and "Traceback" not in result.stderr
     lines = [ln for ln in result.stderr.splitlines() if ln.startswith("error:")]
     assert len(lines) == 1, result.stderr[-800:]
@@ -316,9 +319,51 @@ def test_hostile_instances_json(cli, instances_doc, tmp_path, case, command):
     src = _write(tmp_path / f"{case}.json", _edited(instances_doc, edit))
     # (json.dumps writes float("nan") as NaN and float("inf") as Infinity, as some tools do)
     out = tmp_path / "out.json"
-    line = one_error_line(cli(command, src, "--out", out), 3, src)
+    line = one_error_line(cli(command, src, "--out", out), 3, src, alone=True)
     assert says in line, line
     assert len(line) < 400 and not out.exists()
+
+
+CONTOURS_CASES = {
+    "version7": (lambda d: d.update(schema_version=7), "schema_version 7"),
+    "far_point": (lambda d: d["images"][0]["instances"][0]["contours"][0].__setitem__(0, [1e12, 5]),
+                  "contours[0]: expected [x, y] integer pixel points"),
+    "fraction_point": (lambda d: d["images"][0]["instances"][0]["contours"][0].__setitem__(0, [1.5, 5]),
+                       "got [[1.5, 5]"),
+    "huge_image": (lambda d: d["images"][0].update(image_size=[200_000, 200_000]),
+                   "over the limit of 200,000,000"),
+    "instances_5": (lambda d: d["images"][0].update(instances=5), "instances: expected a list, got 5"),
+    "score_7": (lambda d: d["images"][0]["instances"][0].update(score=7), "expected score in [0, 1]"),
+}
+
+
+@pytest.fixture(scope="module")
+def contours_doc(tmp_path_factory) -> dict:
+    from typer.testing import CliRunner
+
+    from wtcli.cli import app
+
+    out = tmp_path_factory.mktemp("c") / "c.json"
+    r = CliRunner().invoke(app, ["contours", str(SAMPLE / "instances.json"), "--out", str(out)])
+    assert r.exit_code == 0, r.stderr
+    return json.loads(out.read_text())
+
+
+@pytest.mark.parametrize("case", sorted(CONTOURS_CASES))
+def test_hostile_contours_json(cli, contours_doc, tmp_path, case):
+    edit, says = CONTOURS_CASES[case]
+    src = _write(tmp_path / f"{case}.json", _edited(contours_doc, edit))
+    out = tmp_path / "pitch.json"
+    line = one_error_line(cli("pitch", src, "--out", out), 3, src, alone=True)
+    assert says in line, line
+    assert not out.exists()
+
+
+def test_corrupt_mask_png_is_one_line(cli, tmp_path):
+    bad = tmp_path / "mask.png"
+    bad.write_bytes(b"\x89PNG\r\n\x1a\nxxxx")  # OpenCV logs its own complaint unless silenced
+    one_error_line(cli("contours", bad), 3, bad, alone=True)
+    one_error_line(cli("pitch", bad), 3, bad, alone=True)
 
 
 def test_number_past_float_range_and_deep_nesting(cli, instances_doc, tmp_path):

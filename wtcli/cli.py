@@ -119,6 +119,12 @@ def _root(
     7 model, 8 simulation, 9 partial batch failure, 130 interrupted (docs/exit-codes.md).
     """
     ctx.obj = {"debug": debug}
+    if not debug:
+        # OpenCV logs its own lines on stderr for a corrupt image ("IHDR chunk shall be
+        # first"); our one-line error names the file and says the same.
+        import cv2
+
+        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
 
 
 def _register_commands() -> None:

@@ -26,8 +26,8 @@ import numpy as np
 
 from wtcli.console import StageProgress, stage_ticker
 from wtcli.errors import InputError, PerceptionError
-from wtcli.jsonio import document, read_json
-from wtcli.masks import LABELS, Instances, read_instances
+from wtcli.jsonio import document, read_json, shown
+from wtcli.masks import LABELS, Instances, check_pixels, check_size, read_instances
 
 CONTOURS_SCHEMA = "wtinspect.contours"
 CONTOURS_VERSION = 1
@@ -379,6 +379,27 @@ def contours_batch(paths: list[Path], area_threshold: float = DEFAULT_AREA_THRES
     return ContoursBatch(tuple(sets), tuple(errors), tuple(images), loaded[0][2], area_threshold)
 
 
+def _check_numbers(d: dict[str, Any]) -> None:
+    """The numbers of one image of a contours file a reader would trust: the image size within
+    MAX_IMAGE_PIXELS, every contour point an integer within the image extended by its size."""
+    size = d["image_size"]
+    if not isinstance(size, list) or len(size) != 2:
+        raise ValueError(f"image_size: expected [H, W], got {shown(size)}")
+    h, w = check_size(size[0], "image_size[0]"), check_size(size[1], "image_size[1]")
+    check_pixels(h, w, "image_size")
+    if not isinstance(d["instances"], list):
+        raise ValueError(f"instances: expected a list, got {shown(d['instances'])}")
+    for k, inst in enumerate(d["instances"]):
+        if not isinstance(inst, dict) or not isinstance(inst.get("contours"), list):
+            raise ValueError(f"instances[{k}]: expected an object with a 'contours' list")
+        for j, c in enumerate(inst["contours"]):
+            pts = np.asarray(c, dtype=object).reshape(-1) if isinstance(c, list) else None
+            if pts is None or not all(isinstance(v, int) and not isinstance(v, bool)
+                                      and -2 * max(h, w) <= v <= 3 * max(h, w) for v in pts):
+                raise ValueError(f"instances[{k}].contours[{j}]: expected [x, y] integer pixel "
+                                 f"points within the {w}x{h} image, got {shown(c)}")
+
+
 def read_contours(path: str | Path) -> list[tuple[ContourSet | None, str | None, dict]]:
     """Read a ``wtinspect.contours`` file: (set or None, error or None, image record) per image."""
     path = Path(path)
@@ -395,10 +416,11 @@ def read_contours(path: str | Path) -> list[tuple[ContourSet | None, str | None,
             out.append((None, str(d["error"]), img))
             continue
         try:
+            _check_numbers(d)
             cs = ContourSet.from_dict(d, source=str(doc.get("source", path)))
         except KeyError as e:
-            raise InputError(f"{path}: images[{i}]: missing key {e.args[0]!r}") from None
-        except (TypeError, ValueError) as e:
-            raise InputError(f"{path}: images[{i}]: {e}") from None
+            raise InputError(f"{path}: images[{i}]: missing key {shown(e.args[0])}") from None
+        except (TypeError, ValueError, OverflowError) as e:
+            raise InputError(f"{path}: images[{i}]: {str(e)[:200]}") from None
         out.append((cs, None, img))
     return out
