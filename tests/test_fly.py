@@ -15,6 +15,7 @@ import pytest
 from wtcli.errors import ConfigError, SimulationError
 from wtcli.fly.flight import fly_plan, path_deviation, turbine_clearance
 from wtcli.fly.scenario import default_scenario, load_scenario, shipped_scenarios
+from wtcli.fly.navigation import make_navigation
 from wtcli.fly.sim import fly, make_controller, make_reference
 from wtcli.fly.wind import dryden_params, dryden_series, gust_series, make_wind
 from wtcli.geometry import Camera, Turbine
@@ -61,7 +62,7 @@ def blade_pass_plan(distance=5.5, speed=1.5, safe=3.0) -> Plan:
                 safe_distance_m=safe, target_gsd_mm=1.5)
 
 
-QUIET = dict(vehicle={"position_noise_m": 0.0, "velocity_noise_ms": 0.0})
+QUIET = dict(vehicle={"position_noise_m": 0.0, "velocity_noise_ms": 0.0}, positioning={"mode": "ideal"})
 
 
 # ---- scenario ----------------------------------------------------------------------------------
@@ -141,9 +142,14 @@ def test_same_seed_same_flight_other_seed_other_flight():
 def test_straight_line_without_wind_tracks_within_centimetres():
     rep = fly_plan(line_plan(), default_scenario(**QUIET))
     f = rep.automated
-    assert f.deviation.max() < 0.03
-    assert f.deviation.mean() < 0.01
+    # The rigid body lags its set-point where the speed changes (attitude and rotor lag).
+    assert f.deviation.max() < 0.06
+    assert f.deviation.mean() < 0.005
     assert f.path_length_m == pytest.approx(120.0, abs=0.5)
+    # The kinematic model realises each commanded acceleration at once: no lag at all.
+    kin = fly_plan(line_plan(), default_scenario(**{**QUIET, "vehicle": {
+        **QUIET["vehicle"], "model": "kinematic"}}))
+    assert kin.automated.deviation.max() < 1e-6
 
 
 def test_pid_beats_feedforward_in_steady_wind():
@@ -237,7 +243,8 @@ def test_non_finite_state_fails_loudly_not_nan():
     from dataclasses import replace
     with pytest.raises(SimulationError, match="diverged"):
         fly(ref, scn, replace(wind, extra=extra), np.zeros(len(ref.t)),
-            make_controller("pid", ref, scn), np.random.default_rng(0))
+            make_controller("pid", ref, scn),
+            make_navigation("ideal", len(ref.t), 0.02, np.random.default_rng(0), 0.02, 0.05))
 
 
 def test_manual_pilot_is_slower_and_less_precise():

@@ -23,7 +23,9 @@ from wtcli.fly.pilot import manual_route, ou_series, pilot_inputs
 from wtcli.fly.scenario import Scenario
 from wtcli.fly.sim import G, Reference, Track, fly, make_controller, make_reference
 from wtcli.fly.terrain import Ground
-from wtcli.fly.wind import make_wind
+from wtcli.fly.navigation import make_navigation, tower_shadow
+from wtcli.fly.wake import wake_series
+from wtcli.fly.wind import make_wind, mean_speed
 from wtcli.geometry import Camera, Turbine
 from wtcli.geometry.coverage import Coverage, measure_coverage
 from wtcli.plan.clearance import clearance_to_parts
@@ -32,7 +34,7 @@ from wtcli.plan_file import Plan, Route
 FLIGHT_KINDS = ("automated", "no_compensation", "fixed_pattern", "manual")
 SETTLED_M = 0.5
 # Streams of the seeded random generator, so each source of randomness is independent.
-_WIND, _SENSOR, _PILOT = 1, 2, 3
+_WIND, _SENSOR, _PILOT, _WAKE = 1, 2, 3, 4
 
 
 @dataclass(frozen=True)
@@ -232,8 +234,9 @@ def _rng(scn: Scenario, uav_index: int, stream: int) -> np.random.Generator:
 
 
 def fly_route(route: Route, scn: Scenario, ground: Ground, uav_index: int, mode: str,
-              planned: Route | None = None) -> UavFlight:
-    """Fly one route. ``mode``: pid, feedforward or pilot (the route is retimed for the pilot)."""
+              planned: Route | None = None, turbines: tuple | list = ()) -> UavFlight:
+    """Fly one route. ``mode``: pid, feedforward or pilot (the route is retimed for the pilot).
+    ``turbines``: the structures whose wake and RTK shadow the flight meets."""
     dt = 1.0 / scn.control.control_hz
     planned = planned or route
     flown = manual_route(route, scn.manual_pilot)[0] if mode == "pilot" else route
@@ -246,15 +249,29 @@ def fly_route(route: Route, scn: Scenario, ground: Ground, uav_index: int, mode:
                          pitch_rate=scn.vehicle.gimbal_rate_deg_s)
     n = len(ref.t)
     g_ref = ground.height(ref.pos)
-    h_rep = float(np.median(ref.pos[:, 2] - g_ref))
+    agl_ref = ref.pos[:, 2] - g_ref
+    h_rep = float(np.median(agl_ref))
     wind = make_wind(scn.wind, scn.terrain.turbulence_factor, n * scn.substeps, dt / scn.substeps,
-                     max(h_rep, 3.0), _rng(scn, uav_index, _WIND))
+                     max(h_rep, 3.0), _rng(scn, uav_index, _WIND),
+                     heights=np.repeat(np.maximum(agl_ref, 3.0), scn.substeps))
     pilot = None
     prng = _rng(scn, uav_index, _PILOT)
     if mode == "pilot":
         pilot = pilot_inputs(scn.manual_pilot, n, dt, prng)
-    track = fly(ref, scn, wind, g_ref, make_controller(mode, ref, scn, pilot),
-                _rng(scn, uav_index, _SENSOR))
+    pz = scn.positioning
+    shadow = None
+    if pz.rtk_degrades_near_tower and turbines:
+        shadow = tower_shadow(ref.pos, [(np.asarray(t.base, float), t.hub_height) for t in turbines],
+                              pz.rtk_degrade_distance_m)
+    nav = make_navigation(pz.mode, n, dt, _rng(scn, uav_index, _SENSOR),
+                          scn.vehicle.position_noise_m, scn.vehicle.velocity_noise_ms,
+                          near_tower=shadow, refix_s=pz.rtk_refix_s)
+    wake, wake_info = None, {"steps_in_wake": 0.0, "max_deficit_ms": 0.0}
+    if scn.wind.wake and scn.wind.speed_ms > 0 and turbines:
+        speed = np.asarray(mean_speed(scn.wind, np.maximum(agl_ref, 1.0)), float)
+        wake, wake_info = wake_series(list(turbines), ref.pos, ref.t, wind.unit, speed,
+                                      _rng(scn, uav_index, _WAKE))
+    track = fly(ref, scn, wind, g_ref, make_controller(mode, ref, scn, pilot), nav, wake)
 
     steps = ref.reach_step(np.nonzero(flown.photo)[0])  # photos when the set-point gets there
     yaw = track.yaw_deg[steps].copy()
@@ -268,7 +285,8 @@ def fly_route(route: Route, scn: Scenario, ground: Ground, uav_index: int, mode:
     return UavFlight(uav=route.uav, route=flown, planned=planned, ref=ref, track=track,
                      photo_step=steps, photo_yaw_deg=yaw, photo_pitch_deg=pitch,
                      photo_roll_deg=roll, photo_component=comp,
-                     wind_summary={"height_m": h_rep, **wind.summary()})
+                     wind_summary={"height_m": h_rep, **wind.summary(), "wake": wake_info,
+                                   "positioning": nav.summary()})
 
 
 def _camera_roll(track: Track, steps: np.ndarray, yaw_deg: np.ndarray, leak: float) -> np.ndarray:
@@ -555,7 +573,7 @@ def fly_routes(plan: Plan, scn: Scenario, ground: Ground, mode: str,
                tick: Callable[[], None] = lambda: None) -> list[UavFlight]:
     out = []
     for i, r in enumerate(plan.routes):
-        out.append(fly_route(r, scn, ground, i, mode))
+        out.append(fly_route(r, scn, ground, i, mode, turbines=plan.turbines))
         tick()
     return out
 

@@ -34,6 +34,8 @@ class Wind:
     gust_rate_per_min: float
     gust_amplitude_ms: float
     gust_duration_s: float
+    turbulence_class: str = "B"  # IEC 61400-1 category (Kaimal): A+, A, B, C
+    wake: bool = True  # tower and nacelle wake (wtcli.fly.wake)
 
 
 @dataclass(frozen=True)
@@ -69,6 +71,18 @@ class Vehicle:
     velocity_noise_ms: float
     gimbal_pitch_min_deg: float = -90.0  # the camera elevation the gimbal reaches
     gimbal_pitch_max_deg: float = 90.0
+    model: str = "rigid"  # rigid (attitude and motor dynamics) or kinematic
+    attitude_time_constant_s: float = 0.15  # inner attitude loop: tilt rate = error / this
+    max_tilt_rate_deg_s: float = 150.0
+    motor_time_constant_s: float = 0.05  # thrust and body-rate response
+
+
+@dataclass(frozen=True)
+class Positioning:
+    mode: str  # rtk_fixed, rtk_float, gnss, ideal (wtcli.fly.navigation)
+    rtk_degrades_near_tower: bool
+    rtk_degrade_distance_m: float
+    rtk_refix_s: float
 
 
 @dataclass(frozen=True)
@@ -124,6 +138,7 @@ class Scenario:
     baselines: Baselines
     manual_pilot: ManualPilot
     sample_spacing_m: float
+    positioning: Positioning = Positioning("ideal", False, 8.0, 30.0)
     mission: Path | None = None  # turbines/mission YAML to plan from (absolute)
     azimuths: dict | None = None  # {turbine id: [deg, ...]} real blade stop positions, optional
     description: str = ""
@@ -152,7 +167,7 @@ class Scenario:
 # ---- loading ---------------------------------------------------------------------------------
 
 _SECTIONS = ("wind", "terrain", "vehicle", "control", "gains", "coverage", "baselines",
-             "manual_pilot")
+             "manual_pilot", "positioning")
 _TOP = ("name", "description", "mission", "seed", "azimuths", "paper") + _SECTIONS
 
 # key -> (lo, hi, lo_open) for plain numbers of each section
@@ -171,20 +186,24 @@ _NUM = {
                 "gimbal_pitch_min_deg": (-90, 0, False), "gimbal_pitch_max_deg": (0, 90, False),
                 "mass_kg": (0.1, 100, False), "hover_power_w": (1, 20000, False),
                 "battery_wh": (1, 20000, False), "propulsion_efficiency": (0.05, 1, False),
-                "position_noise_m": (0, 5, False), "velocity_noise_ms": (0, 5, False)},
+                "position_noise_m": (0, 5, False), "velocity_noise_ms": (0, 5, False),
+                "attitude_time_constant_s": (0.02, 2, False), "max_tilt_rate_deg_s": (5, 1000, False),
+                "motor_time_constant_s": (0.005, 1, False)},
     "control": {"physics_hz": (5, 1000, False), "control_hz": (1, 500, False),
                 "reference_accel_ms2": (0.1, 20, False), "corner_deviation_m": (0, 5, False),
                 "reference_smoothing_s": (0, 10, False), "divergence_m": (1, 10000, False)},
     "gains": {"kp": (0, 20, False), "ki": (0, 20, False), "kd": (0, 20, False),
               "derivative_filter_s": (0, 5, False), "integral_limit_ms": (0, 30, False)},
     "coverage": {"sample_spacing_m": (0.1, 5, False)},
+    "positioning": {"rtk_degrade_distance_m": (0, 100, False), "rtk_refix_s": (0, 600, False)},
     "manual_pilot": {"speed_factor": (0.05, 1, False), "max_speed_ms": (0.2, 30, False),
                      "hover_per_photo_s": (0, 60, False), "reaction_delay_s": (0, 5, False),
                      "gain_per_s": (0, 5, False), "deadband_m": (0, 20, False),
                      "perception_sigma_m": (0, 20, False), "perception_time_s": (0.1, 600, False),
                      "stick_noise_ms": (0, 10, False), "aim_sigma_deg": (0, 45, False)},
 }
-_BOOL = {"gains": ("feed_forward",), "baselines": ("no_compensation", "fixed_pattern", "manual")}
+_BOOL = {"gains": ("feed_forward",), "baselines": ("no_compensation", "fixed_pattern", "manual"),
+         "positioning": ("rtk_degrades_near_tower",)}
 _INTENSITY = ("auto", "light", "moderate", "severe")
 
 
@@ -235,14 +254,19 @@ def scenario_from_dict(d: Any, where: str = "scenario", base_dir: Path | None = 
             vals[sec][k] = _bool(m[sec], k, f"{w}{sec}")
 
     turb, gust = m["wind"]["turbulence"], m["wind"]["gusts"]
-    model = choice(turb, "model", f"{w}wind.turbulence", ("dryden", "none"))
+    model = choice(turb, "model", f"{w}wind.turbulence", ("kaimal", "dryden", "none"))
+    iec = str(turb.get("iec_class"))
+    if iec not in ("A+", "A", "B", "C"):
+        raise ConfigError(f"{w}wind.turbulence.iec_class: expected one of A+, A, B, C (IEC "
+                          f"61400-1 turbulence categories), got {str(turb.get('iec_class'))[:20]!r}")
     intensity = choice(turb, "intensity", f"{w}wind.turbulence", _INTENSITY)
     sigma = number(turb, "sigma_ms", f"{w}wind.turbulence", lo=0, hi=15, default=None)
     wind = Wind(**vals["wind"], turbulence_model=model, turbulence_intensity=intensity,
                 turbulence_sigma_ms=sigma,
                 gust_rate_per_min=number(gust, "rate_per_min", f"{w}wind.gusts", lo=0, hi=30),
                 gust_amplitude_ms=number(gust, "amplitude_ms", f"{w}wind.gusts", lo=0, hi=20),
-                gust_duration_s=number(gust, "duration_s", f"{w}wind.gusts", lo=0.2, hi=60))
+                gust_duration_s=number(gust, "duration_s", f"{w}wind.gusts", lo=0.2, hi=60),
+                turbulence_class=iec, wake=_bool(m["wind"], "wake", f"{w}wind"))
 
     kind = choice(m["terrain"], "kind", f"{w}terrain", ("flat", "hilly"))
     tf = number(m["terrain"], "turbulence_factor", f"{w}terrain", lo=0, hi=5, default=None)
@@ -256,6 +280,11 @@ def scenario_from_dict(d: Any, where: str = "scenario", base_dir: Path | None = 
         raise ConfigError(f"{w}terrain.amplitude_m: flat terrain has no hills; use kind: hilly "
                           f"or amplitude_m: 0, got {terrain.amplitude_m}")
 
+    from wtcli.fly.navigation import MODES
+
+    positioning = Positioning(mode=choice(m["positioning"], "mode", f"{w}positioning", MODES),
+                              **vals["positioning"])
+    vmodel = choice(m["vehicle"], "model", f"{w}vehicle", ("rigid", "kinematic"))
     seed = number(m, "seed", where, lo=0, hi=2 ** 32 - 1, integer=True)
     name = string(m, "name", where, default=(source.stem if source else "scenario"))
     desc = string(m, "description", where, default="")
@@ -270,10 +299,12 @@ def scenario_from_dict(d: Any, where: str = "scenario", base_dir: Path | None = 
         paper = _paper_row(paper, f"{w}paper")
     try:
         return Scenario(name=name, seed=seed, wind=wind, terrain=terrain,
-                        vehicle=Vehicle(**vals["vehicle"]), control=Control(**vals["control"]),
+                        vehicle=Vehicle(**vals["vehicle"], model=vmodel),
+                        control=Control(**vals["control"]),
                         gains=Gains(**vals["gains"]), baselines=Baselines(**vals["baselines"]),
                         manual_pilot=ManualPilot(**vals["manual_pilot"]),
-                        sample_spacing_m=vals["coverage"]["sample_spacing_m"], mission=mission,
+                        sample_spacing_m=vals["coverage"]["sample_spacing_m"],
+                        positioning=positioning, mission=mission,
                         azimuths=azimuths, description=desc, source=source, paper=paper)
     except ValueError as e:
         raise ConfigError(f"{where}: {e}") from None
@@ -340,6 +371,6 @@ def resolve_scenario(name_or_path: str | Path) -> Path:
                       f"{hint(str(name_or_path), shipped)}; shipped: {', '.join(shipped)}")
 
 
-__all__ = ["Baselines", "Control", "Gains", "ManualPilot", "Scenario", "Terrain", "Vehicle", "Wind",
+__all__ = ["Baselines", "Control", "Gains", "ManualPilot", "Positioning", "Scenario", "Terrain", "Vehicle", "Wind",
            "default_scenario", "load_scenario", "resolve_scenario", "scenario_from_dict",
            "shipped_scenarios"]

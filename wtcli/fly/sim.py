@@ -1,21 +1,30 @@
-"""The flight loop: a kinematic multirotor tracking one route under wind.
+"""The flight loop: a multirotor tracking one route under wind.
 
-Vehicle (per unit mass, ENU): the autopilot's velocity loop asks for the acceleration
-``a = (v_cmd - v) / tau_v`` (plus the reference acceleration as feed-forward) and produces it
-with a thrust ``T = a - D(-v)`` that includes its own still-air drag; thrust is limited by the
-maximum tilt (horizontal, g tan(tilt)) and the vertical acceleration limit. The air acts with
-``D(w - v) = c (w - v) + k |w - v| (w - v)`` (rotor drag plus body drag), so
-``dv/dt = T + D(w - v)``: in still air the vehicle gets what it asked for, in wind it is pushed.
+Vehicle (per unit mass, ENU), ``vehicle.model``:
+
+- ``rigid`` (the default, ``wtcli.fly.rigid``): the autopilot's velocity loop asks for an
+  acceleration, the attitude loop tilts the thrust towards it through a rate-limited inner loop
+  and the rotors' lag, and the collective thrust follows with the rotors' lag.
+- ``kinematic`` (an option): the velocity loop's acceleration ``a = (v_cmd - v) / tau_v`` (plus
+  the reference acceleration as feed-forward) is produced at once, with a thrust ``T = a - D(-v)``
+  that includes its own still-air drag, limited by the maximum tilt (horizontal, g tan(tilt))
+  and the vertical acceleration limit.
+
+In both the air acts with ``D(w - v) = c (w - v) + k |w - v| (w - v)`` (rotor drag plus body drag)
+on the air-relative velocity, so ``dv/dt = T + D(w - v)``: in still air the vehicle gets what it
+asked for (after the lags), in wind it is pushed. The wind is the mean wind with shear at the
+vehicle's height, the precomputed turbulence and gusts, and the structure's wake.
 
 Controllers (``wtcli.fly.control``: PID, feed-forward only, manual pilot) are objects with
 ``reset()`` and ``step()``; each returns the velocity command ``v_cmd``, already limited by the
 speed and climb limits, and says whether the reference acceleration is fed forward and whether
 it holds position (then drifting ``control.divergence_m`` from the set-point fails the flight).
-The controller sees the navigation estimate (true state plus the scenario's sensor noise).
+The controller sees the navigation estimate (the true state plus ``wtcli.fly.navigation``'s
+errors); deviation and clearance are measured on the truth.
 
 Physics runs at ``physics_hz`` (semi-implicit Euler), control at ``control_hz``; states are
-recorded at the control rate. Per-step work is a few dozen float operations in plain Python
-(faster than numpy on 3-vectors); everything else is precomputed or evaluated after the run.
+recorded at the control rate. The controller runs in plain Python per control step, the rigid
+body's physics steps compiled; everything else is precomputed or evaluated after the run.
 """
 
 from __future__ import annotations
@@ -28,6 +37,8 @@ import numpy as np
 from wtcli.errors import SimulationError
 from wtcli.fly.control import (Controller, FeedForwardController, PidController, PilotController,
                                PilotInputs, VelocityLimits)
+from wtcli.fly import rigid
+from wtcli.fly.navigation import Navigation
 from wtcli.fly.scenario import Scenario
 from wtcli.fly.wind import WindSeries
 
@@ -184,9 +195,11 @@ class Track:
 
 
 def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.ndarray,
-        controller: Controller, rng: np.random.Generator) -> Track:
-    """Fly ``ref`` with ``controller`` (reset first) and return the track. ``rng`` draws the
-    navigation noise the controller sees on position and velocity."""
+        controller: Controller, nav: Navigation, wake: np.ndarray | None = None) -> Track:
+    """Fly ``ref`` with ``controller`` (reset first) and return the track. The controller sees
+    the true state plus the navigation errors ``nav``; ``wake`` (N, 3), if given, is the
+    structure's wake added to the wind at each control step. ``scn.vehicle.model`` picks the
+    physics: ``rigid`` (wtcli.fly.rigid, compiled) or ``kinematic`` (below)."""
     veh, ctl = scn.vehicle, scn.control
     n = len(ref.t)
     sub = scn.substeps
@@ -194,9 +207,12 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
     dtp = dt / sub
     if len(wind.extra) < n * sub:
         raise ValueError(f"expected {n * sub} wind samples, got {len(wind.extra)}")
+    if nav.pos_error.shape != (n, 3) or nav.vel_error.shape != (n, 3):
+        raise ValueError(f"expected navigation errors of shape ({n}, 3)")
     controller.reset()
     step = controller.step
     name = controller.name
+    rigid_model = veh.model == "rigid"
 
     # Plain Python lists: indexing them is far cheaper than numpy scalars in the loop.
     R = ref.pos.tolist()
@@ -206,8 +222,9 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
     PF = np.gradient(ref.pitch_deg, dt).tolist()
     WX = wind.extra.tolist()
     GR = np.asarray(ground_under_ref, float).tolist()
-    npos = (rng.standard_normal((n, 3)) * veh.position_noise_m).tolist()
-    nvel = (rng.standard_normal((n, 3)) * veh.velocity_noise_ms).tolist()
+    npos = nav.pos_error.tolist()
+    nvel = nav.vel_error.tolist()
+    WK = np.zeros((n, 3)).tolist() if wake is None else np.asarray(wake, float).tolist()
     ux_, uy_, _ = wind.unit.tolist()
     wspd, href, alpha = scn.wind.speed_ms, scn.wind.reference_height_m, scn.wind.shear_exponent
 
@@ -217,6 +234,13 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
     cd, kq = veh.rotor_drag_per_s, veh.body_drag_per_m
     yr_rate, yr_tau = veh.yaw_rate_deg_s, veh.yaw_time_constant_s
     gp_rate, gp_tau = veh.gimbal_rate_deg_s, veh.gimbal_time_constant_s
+    if rigid_model:
+        P = rigid.params(tau, ahmax, azmax, cd, kq, veh.attitude_time_constant_s,
+                         veh.max_tilt_rate_deg_s, veh.motor_time_constant_s, veh.max_tilt_deg, G)
+        S = rigid.initial_state(R[0], G)
+        W = np.ascontiguousarray(wind.extra, dtype=float)
+        last = np.zeros(6)
+        kernel = rigid.substeps
 
     px, py, pz = R[0]
     vx = vy = vz = 0.0
@@ -234,33 +258,39 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
         arx, ary, arz = A[k]
         agl = pz - GR[k]
         shear = wspd * ((agl if agl > 1.0 else 1.0) / href) ** alpha if wspd > 0 else 0.0
-        mwx, mwy = shear * ux_, shear * uy_
-        for s in range(sub):
-            ex_ = WX[k * sub + s]
-            wx, wy, wz = mwx + ex_[0], mwy + ex_[1], ex_[2]
-            # Thrust: the acceleration asked for plus the vehicle's own still-air drag.
-            sp = math.sqrt(vx * vx + vy * vy + vz * vz)
-            dd = cd + kq * sp
-            tx = (cx - vx) / tau + arx + dd * vx
-            ty = (cy - vy) / tau + ary + dd * vy
-            tz = (cz - vz) / tau + arz + dd * vz
-            th = math.sqrt(tx * tx + ty * ty)
-            if th > ahmax:
-                f = ahmax / th
-                tx *= f
-                ty *= f
-            if tz > azmax:
-                tz = azmax
-            elif tz < -azmax:
-                tz = -azmax
-            rwx, rwy, rwz = wx - vx, wy - vy, wz - vz
-            da = cd + kq * math.sqrt(rwx * rwx + rwy * rwy + rwz * rwz)
-            vx += (tx + da * rwx) * dtp
-            vy += (ty + da * rwy) * dtp
-            vz += (tz + da * rwz) * dtp
-            px += vx * dtp
-            py += vy * dtp
-            pz += vz * dtp
+        kx, ky, kz = WK[k]
+        mwx, mwy = shear * ux_ + kx, shear * uy_ + ky
+        if rigid_model:
+            kernel(S, cx, cy, cz, arx, ary, arz, W, k * sub, sub, mwx, mwy, kz, P, dtp, last)
+            px, py, pz, vx, vy, vz = S[0], S[1], S[2], S[3], S[4], S[5]
+            tx, ty, tz, wx, wy, wz = last
+        else:
+            for s in range(sub):
+                ex_ = WX[k * sub + s]
+                wx, wy, wz = mwx + ex_[0], mwy + ex_[1], kz + ex_[2]
+                # Thrust: the acceleration asked for plus the vehicle's own still-air drag.
+                sp = math.sqrt(vx * vx + vy * vy + vz * vz)
+                dd = cd + kq * sp
+                tx = (cx - vx) / tau + arx + dd * vx
+                ty = (cy - vy) / tau + ary + dd * vy
+                tz = (cz - vz) / tau + arz + dd * vz
+                th = math.sqrt(tx * tx + ty * ty)
+                if th > ahmax:
+                    f = ahmax / th
+                    tx *= f
+                    ty *= f
+                if tz > azmax:
+                    tz = azmax
+                elif tz < -azmax:
+                    tz = -azmax
+                rwx, rwy, rwz = wx - vx, wy - vy, wz - vz
+                da = cd + kq * math.sqrt(rwx * rwx + rwy * rwy + rwz * rwz)
+                vx += (tx + da * rwx) * dtp
+                vy += (ty + da * rwy) * dtp
+                vz += (tz + da * rwz) * dtp
+                px += vx * dtp
+                py += vy * dtp
+                pz += vz * dtp
         # Camera heading and gimbal: rate feed-forward plus first-order tracking, rate-limited.
         d = YF[k] + (YR[k] - yaw) / yr_tau
         yaw += (yr_rate if d > yr_rate else -yr_rate if d < -yr_rate else d) * dt

@@ -1,12 +1,15 @@
-"""Wind: mean wind with power-law shear, Dryden turbulence and 1-cosine gusts, seeded.
+"""Wind: mean wind with power-law shear, Kaimal (IEC 61400-1) or Dryden turbulence and
+1-cosine gusts, seeded.
 
-Turbulence is the low-altitude form (h < 1000 ft) of the Dryden model in MIL-HDBK-1797 (also
+Kaimal (the default): the IEC 61400-1 normal turbulence model of the scenario's turbulence
+category, evaluated along the path's heights (``kaimal_series``). Dryden (an option): the
+low-altitude form (h < 1000 ft) of the Dryden model in MIL-HDBK-1797 (also
 MIL-F-8785C): scale lengths L_w = h, L_u = L_v = h / (0.177 + 0.000823 h)^1.2 (h in feet),
 intensities sigma_w = 0.1 W20, sigma_u = sigma_v = sigma_w / (0.177 + 0.000823 h)^0.4, with W20 the
 wind speed at 20 ft. The spectra are turned into time series by Taylor's frozen-turbulence
-hypothesis: a hovering multirotor sees the field advected past it at the mean wind speed V. The
-series are synthesised at once with an FFT (white noise shaped by the square root of the
-Dryden power spectrum and normalised to the exact variance), so the flight loop only reads a
+hypothesis: a hovering multirotor sees the field advected past it at the mean wind speed V. Both
+models' series are synthesised at once with an FFT (white noise shaped by the square root of
+the power spectrum and normalised to the exact variance), so the flight loop only reads a
 precomputed list. Discrete gusts are the MIL-F-8785C "1-cosine" shape, arriving as a seeded
 Poisson process along the mean wind direction.
 """
@@ -123,24 +126,130 @@ def gust_series(wind: Wind, n: int, dt: float, rng: np.random.Generator) -> tupl
     return out, [(float(s), d, wind.gust_amplitude_ms) for s in starts]
 
 
+# ---- IEC 61400-1 Kaimal turbulence -----------------------------------------------------------
+
+# Reference turbulence intensity I_ref at 15 m/s of the IEC 61400-1 turbulence categories
+# (ed. 3: A 0.16, B 0.14, C 0.12; ed. 4 adds A+ 0.18).
+IEC_IREF = {"A+": 0.18, "A": 0.16, "B": 0.14, "C": 0.12}
+KAIMAL_BAND_M = 10.0  # heights at which the spectrum is evaluated (interpolated between)
+
+
+@dataclass(frozen=True)
+class KaimalParams:
+    """IEC 61400-1 normal turbulence model at one height: sigma_1 = I_ref (0.75 V + 5.6), the
+    lateral and vertical 0.8 and 0.5 of it; Kaimal scales L = 8.1, 2.7, 0.66 Lambda_1 with
+    Lambda_1 = 0.7 z below 60 m, 42 m above."""
+
+    height_m: float
+    sigma_u: float
+    sigma_v: float
+    sigma_w: float
+    L_u: float
+    L_v: float
+    L_w: float
+    V: float
+
+    def to_dict(self) -> dict:
+        return {"height_m": self.height_m, "sigma_ms": [self.sigma_u, self.sigma_v, self.sigma_w],
+                "length_scale_m": [self.L_u, self.L_v, self.L_w], "advection_ms": self.V}
+
+
+def kaimal_params(wind: Wind, height_agl_m: float, turbulence_factor: float = 1.0) -> KaimalParams:
+    """The IEC normal turbulence model's sigmas and Kaimal length scales at a height, with the
+    mean wind of that height (shear) as V; ``turbulence.sigma_ms`` overrides sigma_1."""
+    z = max(float(height_agl_m), 1.0)
+    V = float(mean_speed(wind, z))
+    lam = 0.7 * z if z < 60.0 else 42.0
+    if wind.turbulence_model == "none":
+        s1 = 0.0
+    elif wind.turbulence_sigma_ms is not None:
+        s1 = wind.turbulence_sigma_ms
+    else:
+        s1 = IEC_IREF[wind.turbulence_class] * (0.75 * V + 5.6) if V > 0 else 0.0
+    s1 *= turbulence_factor
+    return KaimalParams(z, s1, 0.8 * s1, 0.5 * s1, 8.1 * lam, 2.7 * lam, 0.66 * lam, max(V, 1.0))
+
+
+def kaimal_psd(L: float, V: float):
+    """Kaimal spectral shape S(f) ~ (L / V) / (1 + 6 f L / V)^(5/3), as a function of omega."""
+    def psd(w: np.ndarray) -> np.ndarray:
+        return 1.0 / (1.0 + 6.0 * (L / V) * w / (2 * math.pi)) ** (5.0 / 3.0)
+    return psd
+
+
+def kaimal_series(wind: Wind, heights: np.ndarray, dt: float, rng: np.random.Generator,
+                  turbulence_factor: float = 1.0) -> tuple[np.ndarray, list[KaimalParams]]:
+    """(n, 3) turbulence (u along, v across the wind, w up) seen along a path flown at the
+    heights above ground ``heights`` (n,): per component one white noise, shaped by the Kaimal
+    spectrum of each height band (every KAIMAL_BAND_M m over the path's range) and scaled by that
+    band's sigma, then interpolated in height at each sample. The same noise under every band
+    keeps the field coherent in height; climbing changes its scales and strength smoothly."""
+    h = np.maximum(np.asarray(heights, float), 1.0)
+    n = len(h)
+    lo, hi = float(h.min()), float(h.max())
+    nb = max(1, int(math.ceil((hi - lo) / KAIMAL_BAND_M)) + 1)
+    zs = np.linspace(lo, hi, nb) if nb > 1 else np.array([lo])
+    params = [kaimal_params(wind, z, turbulence_factor) for z in zs]
+    out = np.zeros((n, 3))
+    if all(p.sigma_u <= 0 for p in params) or n == 0:
+        return out, params
+    m = int(2 ** math.ceil(math.log2(max(n, 16) * 1.25)))
+    omega = 2 * math.pi * np.fft.rfftfreq(m, dt)
+    for i in range(3):
+        spec = np.fft.rfft(rng.standard_normal(m))
+        bands = np.empty((nb, n))
+        for b, p in enumerate(params):
+            sigma, L = ((p.sigma_u, p.L_u), (p.sigma_v, p.L_v), (p.sigma_w, p.L_w))[i]
+            g2 = kaimal_psd(L, p.V)(omega)
+            full = g2[0] + 2 * g2[1:-1].sum() + g2[-1]
+            bands[b] = sigma * np.fft.irfft(spec * np.sqrt(g2 * m / full), n=m)[:n]
+        if nb == 1:
+            out[:, i] = bands[0]
+        else:
+            x = (h - lo) / (hi - lo) * (nb - 1)
+            j = np.clip(np.floor(x).astype(int), 0, nb - 2)
+            f = x - j
+            cols = np.arange(n)
+            out[:, i] = (1 - f) * bands[j, cols] + f * bands[j + 1, cols]
+    return out, params
+
+
 @dataclass(frozen=True)
 class WindSeries:
-    """What one flight sees: w(t, h) = unit * V(h) + turbulence(t) + gust(t) * unit."""
+    """What one flight sees: w(t, h) = unit * V(h) + turbulence(t) + gust(t) * unit (+ the wake,
+    added by the flight from the structure's position)."""
 
     unit: np.ndarray  # (3,) direction the mean wind blows towards
-    dryden: DrydenParams
+    dryden: DrydenParams | None  # the Dryden model's parameters (None with Kaimal or none)
     gusts: list
     extra: np.ndarray  # (n, 3) turbulence + gusts, ENU, at the physics rate
+    kaimal: tuple = ()  # KaimalParams of each height band (Kaimal turbulence)
 
     def summary(self) -> dict:
-        return {"dryden": self.dryden.to_dict(), "gusts": len(self.gusts)}
+        out: dict = {"gusts": len(self.gusts)}
+        if self.dryden is not None:
+            out["dryden"] = self.dryden.to_dict()
+        if self.kaimal:
+            lo, hi = self.kaimal[0], self.kaimal[-1]
+            out["kaimal"] = {"bands": len(self.kaimal), "lowest": lo.to_dict(), "highest": hi.to_dict()}
+        return out
 
 
 def make_wind(wind: Wind, turbulence_factor: float, n: int, dt: float, height_agl_m: float,
-              rng: np.random.Generator) -> WindSeries:
+              rng: np.random.Generator, heights: np.ndarray | None = None) -> WindSeries:
+    """The wind of one flight at the physics rate. Dryden: one parameter set at
+    ``height_agl_m``; Kaimal: evaluated along ``heights`` (n,) above ground (the path), else at
+    ``height_agl_m`` throughout."""
     unit = wind_unit(wind.direction_deg)
-    p = dryden_params(wind, height_agl_m, turbulence_factor)
-    turb = dryden_series(p, n, dt, rng)
+    kaimal: tuple = ()
+    p = None
+    if wind.turbulence_model == "kaimal":
+        h = np.full(n, float(height_agl_m)) if heights is None else np.asarray(heights, float)
+        turb, bands = kaimal_series(wind, h, dt, rng, turbulence_factor)
+        kaimal = tuple(bands)
+    else:
+        p = dryden_params(wind, height_agl_m, turbulence_factor)
+        turb = dryden_series(p, n, dt, rng)
     gust, gusts = gust_series(wind, n, dt, rng)
     lateral = np.array([-unit[1], unit[0], 0.0])
     if wind.speed_ms <= 0:  # no mean direction: turbulence axes along x/y
@@ -149,4 +258,4 @@ def make_wind(wind: Wind, turbulence_factor: float, n: int, dt: float, height_ag
         unit_t = unit
     extra = (turb[:, :1] + gust[:, None]) * unit_t + turb[:, 1:2] * lateral
     extra[:, 2] += turb[:, 2]
-    return WindSeries(unit=unit, dryden=p, gusts=gusts, extra=extra)
+    return WindSeries(unit=unit, dryden=p, gusts=gusts, extra=extra, kaimal=kaimal)
