@@ -19,6 +19,9 @@ VIEWS = ("front", "oblique", "side", "rear")
 # "mixed" draws a view with these odds: front photos are what the pipeline consumes, the rest
 # teach the segmenter the shapes real flights also see.
 VIEW_ODDS = {"front": 0.42, "oblique": 0.30, "side": 0.13, "rear": 0.15}
+# The wider views' sampler per view name, registered by wtcli.synth.views (loaded with the
+# package): views builds on this module, so this module does not import it back.
+WIDE_SAMPLERS: dict = {}
 
 SENSOR_WIDTH_MM = 13.2  # 1-inch drone sensor
 SKIES = ("clear", "hazy", "overcast", "sunset")
@@ -138,9 +141,9 @@ def sample_scene(rng: np.random.Generator, width: int, height: int, view: str | 
         names = sorted(view_mix)
         view = _choice(rng, tuple(names), tuple(view_mix[n] for n in names))
     if view is not None and view not in VIEWS:
-        from wtcli.synth.views import sample_wide_scene
-
-        return sample_wide_scene(rng, width, height, view, rotor_azimuth=rotor_azimuth)
+        if view not in WIDE_SAMPLERS:
+            raise ValueError(f"expected view in {VIEWS + tuple(WIDE_SAMPLERS)}, got {view!r}")
+        return WIDE_SAMPLERS[view](rng, width, height, view, rotor_azimuth=rotor_azimuth)
     if view is None:
         view = _choice(rng, tuple(VIEW_ODDS), tuple(VIEW_ODDS.values()))
     turbine = sample_turbine(rng, rotor_azimuth=rotor_azimuth)

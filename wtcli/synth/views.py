@@ -19,8 +19,9 @@ from typing import Any
 import numpy as np
 
 from wtcli.geometry import Camera, Turbine
-from wtcli.synth.scene import (SENSOR_WIDTH_MM, VIEW_ODDS, Environment, Scene, _choice,
-                               _sample_environment, _sample_others, _view_offset, sample_turbine)
+from wtcli.synth.scene import (SENSOR_WIDTH_MM, VIEW_ODDS, WIDE_SAMPLERS, Environment, Scene,
+                               _choice, _sample_environment, _sample_others, _view_offset,
+                               sample_turbine)
 
 WIDE_VIEWS = ("closeup", "nadir", "hub", "cut", "broadside", "overtower", "distant")
 Z = np.array([0.0, 0.0, 1.0])
@@ -120,6 +121,9 @@ def sample_wide_scene(rng: np.random.Generator, width: int, height: int, view: s
                  roll_deg=float(detail.pop("roll_deg")), turbine=turbine, camera=camera,
                  others=tuple(others), env=env, spares=tuple(spares), detail=detail)
 
+
+
+WIDE_SAMPLERS.update(dict.fromkeys(WIDE_VIEWS, sample_wide_scene))  # scene.sample_scene asks here
 
 # ---- the views ------------------------------------------------------------------------------
 def _closeup(rng, width, height, rotor_azimuth):
@@ -353,7 +357,7 @@ def _distant(rng, width, height, rotor_azimuth):
     fill = float(rng.uniform(0.06, 0.3))
     dist = t.rotor_diameter * cam0.fx / (fill * height)
     hub = t.hub_center
-    z_cam = float(rng.uniform(12, 120))
+    z_cam = 6.0 + 100.0 * float(rng.random()) ** 2  # mostly low: structures nearby stand in the view
     horiz = math.sqrt(max(dist * dist - (hub[2] - z_cam) ** 2, 1.0))
     pos = hub + horiz * _horizontal(heading) + np.array([0, 0, z_cam - hub[2]])
     roll = float(rng.normal(0, 3))
