@@ -342,7 +342,7 @@ def test_distractors_never_enter_the_masks():
     projected turbine part (main, others, spare blades), and no mask pixel lies wholly under
     a structure standing in front of the turbines (redrawn from the ground truth)."""
     hidden = 0
-    for seed in (2, 4, 9, 13):
+    for seed in (2, 9, 13, 18):
         s = render_sample(seed, WW, WH, view="distant", labels="half")
         cam = Camera.from_dict(s.truth["camera"])
         front = [clutter.Structure("x", np.array(d["members"]), np.array(d["radius"]), (0, 0, 0), True)

@@ -113,15 +113,18 @@ def pixel_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def render_background(camera: Camera, env: Environment, turbine: Turbine,
-                      rng: np.random.Generator, zenith: np.ndarray, horizon: np.ndarray) -> np.ndarray:
+                      rng: np.random.Generator, zenith: np.ndarray, horizon: np.ndarray,
+                      waves: np.random.Generator | None = None) -> np.ndarray:
     """The background, BGR float32 (H, W, 3). Smooth fields (sky, clouds, land colour, haze,
     sea, ridges) are computed on a half-resolution grid of the same camera and enlarged; the
-    ground's fine detail (bushes, soil grain) is sampled at full resolution on top."""
+    ground's fine detail (bushes, soil grain) is sampled at full resolution on top.
+    ``waves``: a generator of its own for waves on the sea, seen from close above (the wider
+    views' close-ups); None leaves the sea smooth, as the whole-rotor views have it."""
     H, W = camera.height_px, camera.width_px
     f = 2 if W * H >= 100_000 else 1
     lo = Camera(-(-W // f), -(-H // f), camera.focal_mm, camera.sensor_width_mm,
                 camera.position, camera.R)
-    img, det = _background_lo(lo, env, turbine, rng, zenith, horizon, f)
+    img, det = _background_lo(lo, env, turbine, rng, zenith, horizon, f, waves)
     if f > 1:
         img = cv2.resize(img, (W, H), interpolation=cv2.INTER_LINEAR)
     if det is None:
@@ -146,7 +149,7 @@ def render_background(camera: Camera, env: Environment, turbine: Turbine,
 
 
 def _background_lo(camera: Camera, env: Environment, turbine: Turbine, rng: np.random.Generator,
-                   zenith: np.ndarray, horizon: np.ndarray, f: int):
+                   zenith: np.ndarray, horizon: np.ndarray, f: int, waves=None):
     dx, dy, dz = pixel_rays(camera)
     sun = sun_direction(env).astype(np.float32)
     cos_sun = dx * sun[0] + dy * sun[1] + dz * sun[2]
@@ -197,7 +200,8 @@ def _background_lo(camera: Camera, env: Environment, turbine: Turbine, rng: np.r
     det = None
     down = dz < -1e-4
     if down.any():
-        img, det = _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img, f)
+        img, det = _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img, f,
+                           waves)
     if env.hills:
         img, hill = _hills(camera, env, rng, dz, elev, az, horizon, img)
         if det is not None:
@@ -205,7 +209,7 @@ def _background_lo(camera: Camera, env: Environment, turbine: Turbine, rng: np.r
     return np.clip(img, 0, 1.2), det
 
 
-def _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img, scale):
+def _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img, scale, waves=None):
     H, W = dz.shape
     h = max(float(camera.position[2]), 0.5)
     tt = np.minimum(h / np.maximum(-dz, 1e-6), MAX_GROUND_M)
@@ -309,9 +313,12 @@ def _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img
         # Sun glitter: reflection of the sun on waves.
         sun = sun_direction(env)
         refl = dx * sun[0] + dy * sun[1] - dz * sun[2]
+        wave_rng = waves
         waves = _remap_wrap(np.ascontiguousarray(tile[..., 3]), X / 1.5, Y / 0.5)
         glit = env.sun_strength * np.exp((refl - 1) / 0.004) * smoothstep(0.55, 0.8, waves)
         sea_col = sea_col + glit[..., None] * 0.8
+        if wave_rng is not None:
+            sea_col = _sea_waves(sea_col, wave_rng, X, Y, foot, env)
         shore = sea & (along < coast + 15)
         sea_col[shore] = sea_col[shore] * 0.6 + 0.3
         col = np.where(sea[..., None], sea_col, col)
@@ -331,6 +338,21 @@ def _ground(camera, env, turbine, rng, dx, dy, dz, down, horizon, glow, sky, img
            "tile": tile, "m": mF, "cover": cover, "bush": bush_col,
            "grain": float(rng.uniform(0.15, 0.4))}
     return np.where(down[..., None], col, img), det
+
+
+def _sea_waves(sea_col, rng, X, Y, foot, env):
+    """Wind waves on the sea in world metres: long crests across the wind, lit on their
+    windward slopes, fading to their average where a wave spans less than a pixel."""
+    tile = bank_tile(rng, 256, int(rng.integers(10, 24)), octaves=4, gain=0.6)
+    ang = float(rng.uniform(0, math.pi))
+    m = float(rng.uniform(0.6, 2.0))  # metres per texel across the crests
+    c, s = math.cos(ang), math.sin(ang)
+    wx = (X * c + Y * s) / m
+    wy = (-X * s + Y * c) / (m * float(rng.uniform(2.5, 5.0)))
+    w = _remap_wrap(tile, wx, wy) - 0.5
+    seen = np.clip(1.5 * m / np.maximum(foot, 1e-6) - 0.5, 0, 1)
+    k = float(rng.uniform(0.25, 0.5)) * (0.6 + 0.4 * env.sun_strength)
+    return sea_col * (1.0 + k * w * seen)[..., None] + (0.12 * np.clip(w, 0, None) * seen)[..., None]
 
 
 def _hills(camera, env, rng, dz, elev, az, horizon, img):

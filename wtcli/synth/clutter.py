@@ -119,6 +119,17 @@ def _chimney(base: np.ndarray, h: float, rng) -> tuple[np.ndarray, np.ndarray]:
     return m, r
 
 
+def on_sea(xy: np.ndarray, env, turbine: Turbine) -> np.ndarray:
+    """Whether ground points (..., 2) may lie on the sea: beyond the coast less its largest
+    wiggle (background.py bends the coastline by at most 750 m either way)."""
+    xy = np.asarray(xy, float)
+    if env.sea_distance_m is None:
+        return np.zeros(xy.shape[:-1], bool)
+    b = math.radians(env.sea_bearing_deg)
+    along = (xy - turbine.base_xyz[:2]) @ np.array([math.sin(b), math.cos(b)])
+    return along >= env.sea_distance_m - 800.0
+
+
 def sample_structures(rng: np.random.Generator, scene, limits: tuple[float, float]) -> list[Structure]:
     """Pylons (with their lines), poles and chimneys around the turbine; the distant view also
     stands some between the camera and the turbines. ``limits``: the (nearest, farthest)
@@ -151,6 +162,8 @@ def sample_structures(rng: np.random.Generator, scene, limits: tuple[float, floa
 
     def keep(s: Structure) -> bool:
         c, r = s.centre_and_size()
+        if on_sea(c[:2], scene.env, t):
+            return False
         d = float(np.linalg.norm(c - cam.position))
         return (d + r < near - 3.0) if s.foreground else (d - r > far + 3.0)
 
@@ -341,6 +354,11 @@ def paint_tracks(bg: np.ndarray, scene, rng, horizon) -> np.ndarray:
             ang += float(rng.normal(0, 0.06))
             pts.append(pts[-1] + 5.0 * np.array([math.cos(ang), math.sin(ang)]))
         pts = np.asarray(pts)
+        land = ~on_sea(pts, env, t)  # tracks stay on land: cut where one would reach the sea
+        if not land.all():
+            pts = pts[:int(np.argmin(land))]
+        if len(pts) < 2:
+            continue
         d = np.diff(pts, axis=0)
         nrm = np.stack([-d[:, 1], d[:, 0]], 1) / np.linalg.norm(d, axis=1, keepdims=True)
         left, right = pts[:-1] + nrm * width / 2, pts[:-1] - nrm * width / 2

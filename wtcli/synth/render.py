@@ -46,6 +46,7 @@ _LOGO_COLOURS = ((0.55, 0.25, 0.05), (0.2, 0.45, 0.1), (0.15, 0.15, 0.6), (0.3, 
 # wider, opt-in ones (wtcli.synth.views). A view's index seeds its scenes, so new views go last.
 ALL_VIEWS = VIEWS + WIDE_VIEWS
 VIEW_MIX_STREAM = 7_000_003  # the stream a view mix draws each image's view from
+WAVES_STREAM = 7_000_004  # the wider views' waves on the sea (a stream of their own)
 
 
 def min_instance_pixels(width: int, height: int) -> int:
@@ -172,7 +173,8 @@ def render_sample(seed: int, width: int = 640, height: int = 480,
         scene = sample_scene(rng, width, height, view, rotor_azimuth=azimuth)
     cam = scene.camera
     zenith, horizon = sky_colours(scene.env, rng)
-    bg = render_background(cam, scene.env, scene.turbine, rng, zenith, horizon)
+    waves = np.random.default_rng([int(seed), width, height, WAVES_STREAM]) if wide else None
+    bg = render_background(cam, scene.env, scene.turbine, rng, zenith, horizon, waves=waves)
     if wide:
         bg = clutter.paint_tracks(bg, scene, rng, horizon)
     bg = _shadows(bg, scene)
