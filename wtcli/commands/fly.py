@@ -113,7 +113,9 @@ def register(app: typer.Typer) -> None:
         from wtcli.fly.flight import describe
         from wtcli.fly.scenario import load_scenario, resolve_scenario
         from wtcli.jsonio import document, dumps, write_json
+        from wtcli.outputs import check_outputs
 
+        check_outputs(files=[out], folders=[pictures])  # before flying, not after
         if paper:
             from wtcli.fly.run import mean_changes, paper_table
 
