@@ -33,14 +33,18 @@ def writable_folder(folder: str | Path, what: str = "--out") -> Path:
     if folder.exists() and not folder.is_dir():
         raise OutputError(f"{folder}: exists and is not a folder; choose another {what}")
     try:
-        folder.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(prefix=".wtinspect-probe.", dir=folder)
-        os.close(fd)
-        os.unlink(probe)
+        _probe(folder)
     except OSError as e:
         raise OutputError(f"{folder}: cannot write there ({_reason(e)}); choose another "
                           f"{what}") from None
     return folder
+
+
+def _probe(folder: Path) -> None:
+    folder.mkdir(parents=True, exist_ok=True)
+    fd, probe = tempfile.mkstemp(prefix=".wtinspect-probe.", dir=folder)
+    os.close(fd)
+    os.unlink(probe)
 
 
 def writable_file(path: str | Path, what: str = "--out") -> Path:
@@ -51,8 +55,12 @@ def writable_file(path: str | Path, what: str = "--out") -> Path:
         raise OutputError(f"{path}: is a folder; {what} needs a file name")
     parent = path.parent
     if parent.exists() and not parent.is_dir():
-        raise OutputError(f"{parent}: exists and is not a folder, so {path} cannot be written")
-    writable_folder(parent, what)
+        raise OutputError(f"{path}: cannot be written: {parent} is a file, not a folder")
+    try:
+        _probe(parent)
+    except OSError as e:
+        raise OutputError(f"{path}: cannot write ({_reason(e)} in {parent}); choose another "
+                          f"{what}") from None
     return path
 
 
