@@ -80,8 +80,12 @@ def pass_params(mission: Mission) -> tuple[PassParams, float, float]:
     return pp, gsd_eval, float(cam.gsd_mm(st))
 
 
+LAUNCH_AHEAD_M = 60.0  # the automatic launch point: this far in front of the first rotor (or
+# its tip radius + 15 m if farther), on the ground (fleet.launch in turbines-defaults.yaml)
+
+
 def default_launch(t: Turbine) -> np.ndarray:
-    p = t.base_xyz + t.axis * max(60.0, t.tip_radius + 15.0)
+    p = t.base_xyz + t.axis * max(LAUNCH_AHEAD_M, t.tip_radius + 15.0)
     return np.array([p[0], p[1], t.base_xyz[2]])
 
 
