@@ -122,7 +122,6 @@ def sample_wide_scene(rng: np.random.Generator, width: int, height: int, view: s
                  others=tuple(others), env=env, spares=tuple(spares), detail=detail)
 
 
-
 WIDE_SAMPLERS.update(dict.fromkeys(WIDE_VIEWS, sample_wide_scene))  # scene.sample_scene asks here
 
 # ---- the views ------------------------------------------------------------------------------
