@@ -183,14 +183,23 @@ def independent_min_clearance(turbines, P: np.ndarray, near: float) -> float:
     return cur
 
 
+def enclosing_sphere(t) -> tuple[np.ndarray, float]:
+    """(centre, radius) of a sphere round the middle of the tower that holds every part: the
+    rotor, nacelle and hub reach at most ``horiz`` sideways and ``vert`` above or below it."""
+    a_max = float(np.max(t.blade_semi_axes(np.linspace(0, 1, 101))[0]))
+    horiz = max(t.tip_radius + t.overhang + t.nacelle_length + t.hub_radius + a_max,
+                t.tower_base_radius, t.tower_top_radius)
+    vert = 0.5 * t.hub_height + t.tip_radius + a_max + t.nacelle_height
+    return t.base_xyz + np.array([0.0, 0.0, 0.5 * t.hub_height]), math.hypot(horiz, vert)
+
+
 def leg_samples(pos: np.ndarray, turbines, reach: float) -> np.ndarray:
     """Points every ``LEG_STEP`` m along each leg, only where the leg passes within ``reach`` of
     a turbine's bounding sphere (the rest of a 10 km transit is far from everything)."""
     pts = [pos]
     for t in turbines:
-        top = max(t.tip_radius + t.overhang + t.nacelle_length, t.hub_height)
-        centre = t.base_xyz + np.array([0.0, 0.0, 0.5 * t.hub_height])
-        radius = math.hypot(top, 0.5 * t.hub_height) + reach
+        centre, radius = enclosing_sphere(t)
+        radius += reach
         p0, p1 = pos[:-1], pos[1:]
         dv = p1 - p0
         L = np.linalg.norm(dv, axis=1)

@@ -1175,6 +1175,16 @@ def test_independent_distance_is_never_below_the_models_lower_bound():
     assert np.median(indep[near] - model[near]) < 0.05  # a close bound, not a loose one
 
 
+def test_the_suites_leg_samples_reach_every_part():
+    """Legs are sampled only within a sphere round each turbine: every surface point of the
+    suite's turbines (low hubs, blades straight up included) lies inside it."""
+    pp = _plan_property()
+    for seed in range(8):
+        for t in mission_from_dict(pp.random_site(np.random.default_rng(seed))).turbines:
+            c, r = pp.enclosing_sphere(t)
+            assert np.linalg.norm(t.surface_samples(1.0).points - c, axis=1).max() <= r
+
+
 @pytest.mark.parametrize("seed", [4, 1])
 def test_random_sites_plan_or_refuse_in_one_line_safely(seed):
     """A few sites of benchmarks/plan_property.py (1 000 of them there): planned ones are
