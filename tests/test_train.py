@@ -471,3 +471,20 @@ def test_train_refuses_a_folder_holding_a_run(tmp_path, cli):
     assert res.exit_code == ExitCode.INPUT and "holds a run already" in res.output
     res = cli("train", "--real", tmp_path / "no-photos", "--out", tmp_path / "r")
     assert res.exit_code == ExitCode.INPUT and "--real" in res.output
+
+
+def test_view_mix_reaches_the_renders(tmp_path):
+    from wtcli.segment.train import make_dataset
+
+    plain = make_dataset(_tiny(tmp_path, augment=False))
+    wide = make_dataset(_tiny(tmp_path, augment=False, view_mix="closeup"))
+    assert wide.view_mix == "closeup" and plain.view_mix is None
+    # A close-up fills much of the frame with a blade; the usual mix shows whole turbines.
+    def largest(ds):
+        return np.mean([float(ds[k][1]["masks"].flatten(1).sum(1).max()) / (96 * 72)
+                        if len(ds[k][1]["labels"]) else 0.0 for k in range(4)])
+
+    assert largest(wide) > 0.1 > largest(plain)
+    assert not torch.equal(plain[0][0], wide[0][0])
+    with pytest.raises(ConfigError, match="--view-mix"):
+        train(_tiny(tmp_path, view_mix="front=x"))

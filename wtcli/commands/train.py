@@ -46,6 +46,10 @@ def train(
                                 help="Share of synthetic renders whose rotor stands where crews "
                                      "stop it for inspection: a Y or an inverted Y (a blade in "
                                      "front of the tower)."),
+    view_mix: Optional[str] = typer.Option(None, "--view-mix",
+                                           help="Shares of the renders' views, as `synth "
+                                                "--view-mix`, e.g. 'mixed=0.5,closeup=0.2,"
+                                                "nadir=0.1,distant=0.2' (default: the usual mix)."),
     precision: str = typer.Option("auto", "--precision",
                                   help="auto | fp32 | bf16. auto: the backbone in bfloat16 on a "
                                        "CPU that does bf16 natively (faster steps), else fp32."),
@@ -113,7 +117,7 @@ def train(
                       augment=not no_augment, stops=stops, resume=resume, train_sizes=train_sizes,
                       precision=precision, fine_lr_mult=fine_lr_mult,
                       average_with=str(average_with) if average_with else None,
-                      real=str(real) if real else None, real_share=real_share,
+                      view_mix=view_mix, real=str(real) if real else None, real_share=real_share,
                       real_holdout=tuple(real_holdout or ()))
     report = _Report(iterations, max_minutes, checkpoint_every)
     try:

@@ -55,13 +55,18 @@ def _fallback_render(seed: int, width: int, height: int, view: str | None = None
                                  np.stack([i[2] for i in inst])))
 
 
-def render(seed: int, width: int, height: int, view: str | None = None, stops: float = 0.0) -> Sample:
-    """One synthetic scene: wtcli.synth.render.render_sample when available."""
+def render(seed: int, width: int, height: int, view: str | None = None, stops: float = 0.0,
+           view_mix: str | None = None) -> Sample:
+    """One synthetic scene: wtcli.synth.render.render_sample when available (``view_mix``: its
+    shares of views, e.g. the wider ones, docs/synth.md; None: the default mix)."""
     try:
         from wtcli.synth.render import render_sample
     except ImportError:
         return _fallback_render(seed, width, height, view)
-    s = render_sample(seed, width=width, height=height, view=view, stops=stops)
+    if view_mix is None:  # as before view mixes existed: the same scenes, seed for seed
+        s = render_sample(seed, width=width, height=height, view=view, stops=stops)
+    else:
+        s = render_sample(seed, width=width, height=height, view=view, stops=stops, view_mix=view_mix)
     return Sample(s.image, s.instances)
 
 
@@ -70,8 +75,9 @@ class SynthDataset(torch.utils.data.Dataset):
 
     def __init__(self, length: int, width: int = 640, height: int = 480,
                  seed_base: int = TRAIN_SEED_BASE, augment: bool = True, aug_seed: int = 0,
-                 stops: float = 0.0):
+                 stops: float = 0.0, view_mix: str | None = None):
         self.length, self.width, self.height = int(length), int(width), int(height)
+        self.view_mix = view_mix
         self.seed_base, self.augment, self.aug_seed = int(seed_base), augment, int(aug_seed)
         self.stops = float(stops)  # render_sample's: rotors stopped in a Y / inverted Y
 
@@ -79,7 +85,8 @@ class SynthDataset(torch.utils.data.Dataset):
         return self.length
 
     def __getitem__(self, i: int):
-        s = render(self.seed_base + int(i), self.width, self.height, stops=self.stops)
+        s = render(self.seed_base + int(i), self.width, self.height, stops=self.stops,
+                   view_mix=self.view_mix)
         if self.augment:
             s = augment(s, np.random.default_rng((self.aug_seed, self.seed_base + int(i))))
         return to_target(s)

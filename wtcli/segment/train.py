@@ -64,6 +64,7 @@ class TrainConfig:
     threads: int | None = None  # torch CPU threads; None: 1 on a CPU (see train())
     augment: bool = True
     stops: float = 0.3  # share of synthetic scenes whose rotor stands in a Y / inverted Y
+    view_mix: str | None = None  # render_sample's shares of views (e.g. the wider ones); None: default
     resume: bool = False
     train_sizes: tuple[int, ...] = field(default_factory=lambda: TRAIN_MIN_SIZES)
     precision: str = "auto"  # auto | fp32 | bf16: see model.resolve_precision
@@ -94,6 +95,13 @@ class TrainConfig:
         need(self.max_minutes is None or self.max_minutes > 0, "expected --max-minutes > 0")
         need(0.0 <= self.stops <= 1.0, f"expected --stops in [0, 1], got {self.stops}")
         need(0.0 < self.real_share <= 1.0, f"expected --real-share in (0, 1], got {self.real_share}")
+        if self.view_mix is not None:
+            from wtcli.synth.render import parse_view_mix
+
+            try:
+                parse_view_mix(self.view_mix)
+            except ValueError as e:
+                raise ConfigError(f"--view-mix: {e}") from None
         need(self.real is not None or not self.real_holdout,
              "--real-holdout-sequence needs --real (the photos it leaves out)")
         need(self.precision in PRECISIONS,
@@ -127,7 +135,7 @@ def make_dataset(cfg: TrainConfig):
         base = D.CocoDataset(cfg.data, augment=cfg.augment, aug_seed=cfg.seed)
     else:
         base = D.SynthDataset(cfg.synth_count, cfg.width, cfg.height, augment=cfg.augment,
-                              aug_seed=cfg.seed, stops=cfg.stops)
+                              aug_seed=cfg.seed, stops=cfg.stops, view_mix=cfg.view_mix)
     if not cfg.real:
         return base
     real = D.RealDataset(cfg.real, holdout=tuple(cfg.real_holdout), augment=cfg.augment,
