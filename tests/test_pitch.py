@@ -746,3 +746,25 @@ def test_photo_to_pitch_counts_and_the_one_short_rotor(tmp_path, monkeypatch):
     assert len(res.blades) == 3 and [b.admitted_low_score for b in res.blades] == [False, False, True]
     no_floor = photo_to_pitch(tmp_path / "p.jpg", 3, candidate_floor=None)
     assert "found 2 blades" in no_floor.error
+
+
+def test_overlay_finds_the_photo_segment_read(cli, tmp_path, monkeypatch):
+    """A contours JSON made from ``segment``'s instances JSON (in another folder than the
+    photos) draws its overlay on the photo at the ``path`` segment recorded."""
+    from wtcli.pitch.inputs import load_pitch_input
+    from wtcli.pitch.overlay import overlay_background
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "photos").mkdir()
+    (tmp_path / "seg").mkdir()
+    photo = np.full((120, 160, 3), 200, np.uint8)
+    cv2.imwrite(str(tmp_path / "photos" / "a.png"), photo)
+    img = {"id": 1, "file_name": "a.png", "path": "photos/a.png", "width": 160, "height": 120}
+    write_instances(tmp_path / "seg" / "instances.json", [img], [rotor(120, 160, [90, 210, 330])])
+    assert cli("contours", "seg/instances.json", "--out", "contours.json").exit_code == 0
+    (inp,) = load_pitch_input(["contours.json"])
+    bg, note = overlay_background(inp, None)
+    assert note == "" and bg is not None and bg.shape == photo.shape and (bg == 200).all()
+    assert cli("pitch", "contours.json", "--overlay-dir", "ov").exit_code == 0
+    drawn = cv2.imread("ov/a_pitch.png")
+    assert (drawn == 200).all(axis=2).mean() > 0.3  # the photo's grey; the canvas has none

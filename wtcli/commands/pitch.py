@@ -49,7 +49,8 @@ def register(app: typer.Typer) -> None:
                                         "class and φ drawn on it."),
         image: Optional[Path] = typer.Option(
             None, "--image", help="Background photo for the overlay (one image only); default: "
-                                  "the image's file_name next to the instances JSON, else the masks."),
+                                  "the image's file_name next to the instances JSON, or the "
+                                  "photo segment read, else the masks."),
         json_out: bool = typer.Option(False, "--json", help="Print the pitch JSON on stdout."),
     ) -> None:
         """Measure each blade's angle θ, its class and its direction φ hub -> tip (eq. 7)."""

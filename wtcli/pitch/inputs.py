@@ -39,15 +39,14 @@ class PitchInput:
     score_threshold: float | None = None  # a segmented photo: 0.5; a file: none (all count)
 
 
-def _image_candidates(file_name: str | None, *dirs: Path) -> tuple[Path, ...]:
-    if not file_name:
-        return ()
-    out = []
-    for d in dirs:
-        p = d / file_name
-        if p not in out:
-            out.append(p)
-    return tuple(out)
+def _image_candidates(img: dict, *dirs: Path) -> tuple[Path, ...]:
+    """Where the image's photo may be: its ``file_name`` in each of ``dirs``, then the ``path``
+    that ``segment`` records (as given to it)."""
+    file_name, recorded = img.get("file_name"), img.get("path")
+    out = [d / file_name for d in dirs] if file_name else []
+    if recorded:
+        out.append(Path(str(recorded)))
+    return tuple(dict.fromkeys(out))
 
 
 def area_threshold_px(area_threshold: float | None) -> float:
@@ -73,7 +72,7 @@ def load_pitch_input(paths: list[Path], area_threshold: float | None = None) -> 
             return _from_contours_file(first, area_threshold)
         out = []
         for img, inst in read_instances(first):
-            cands = _image_candidates(img.get("file_name"), first.parent)
+            cands = _image_candidates(img, first.parent)
             try:
                 cs = require_contours(find_contours(inst, thr, image=img, source=str(first)))
                 out.append(PitchInput(cs, None, img, cands))
@@ -117,7 +116,7 @@ def _from_contours_file(path: Path, area_threshold: float | None) -> list[PitchI
     doc_source = read_json(path).get("source", "")
     src_dir = Path(doc_source).parent if doc_source else Path(".")
     for cs, err, img in read_contours(path):
-        cands = _image_candidates(img.get("file_name"), src_dir, path.parent / src_dir, path.parent)
+        cands = _image_candidates(img, src_dir, path.parent / src_dir, path.parent)
         if cs is not None and area_threshold is not None:
             if area_threshold < cs.area_threshold:
                 raise ConfigError(f"{path} was filtered at {cs.area_threshold:g} px; a lower "
