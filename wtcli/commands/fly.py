@@ -96,7 +96,8 @@ def register(app: typer.Typer) -> None:
         out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write the report JSON here."),
         pictures: Optional[Path] = typer.Option(
             None, "--pictures", metavar="DIR",
-            help="Write path.png, deviation.png and coverage.png here."),
+            help="Write path.png, deviation.png and coverage.png here (with --paper-table: "
+                 "sensitivity.png)."),
         baselines: bool = typer.Option(
             False, "--baselines", help="Also fly the baselines the scenario enables "
                                        "(no compensation, fixed pattern, manual pilot)."),
@@ -122,8 +123,19 @@ def register(app: typer.Typer) -> None:
             with stage_bars({"scenarios": "the paper's scenarios, planned and flown"}) as progress:
                 rows = paper_table(seed=seed, progress=progress)
             means = mean_changes(rows)
-            doc = document(PAPER_TABLE_SCHEMA, 1, {"rows": [r.to_dict() for r in rows],
-                                                   "mean_change": means})
+            body = {"rows": [r.to_dict() for r in rows], "mean_change": means}
+            if pictures is not None:
+                from wtcli.fly.pictures import write_sensitivity
+                from wtcli.fly.run import sensitivity
+
+                s2 = next((r for r in rows if r.name == "paper-s2"), rows[0])
+                with stage_bars({"sensitivity": f"sensitivity of the deviation ({s2.name})"}) as pr:
+                    body["sensitivity"] = sensitivity(s2.plan, s2.scenario, progress=pr)
+                path = write_sensitivity(body["sensitivity"], pictures,
+                                         f"{s2.name}: automated flight's deviation, one thing "
+                                         "changed at a time")
+                err_console.print(f"pictures -> {path}")
+            doc = document(PAPER_TABLE_SCHEMA, 1, body)
             if out is not None:
                 write_json(out, doc)
             if json_out:

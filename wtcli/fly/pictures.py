@@ -3,7 +3,9 @@
 - ``path.png``: the path flown beside the planned one, from above and from the side, with the
   turbines' towers and rotor discs and the photo positions;
 - ``deviation.png``: distance to the planned path over time, one line per way of flying;
-- ``coverage.png``: measured coverage of each blade side, automated beside the baselines.
+- ``coverage.png``: measured coverage of each blade side, automated beside the baselines;
+- ``sensitivity.png`` (with ``--paper-table``): deviation against wind speed, IEC turbulence
+  category and positioning mode.
 """
 
 from __future__ import annotations
@@ -91,7 +93,7 @@ def _ticks(a: float, b: float, n: int = 5) -> list[float]:
     mag = 10 ** np.floor(np.log10(raw))
     step = min((m * mag for m in (1, 2, 5, 10)), key=lambda s: abs(s - raw))
     first = np.ceil(a / step) * step
-    return [round(float(v), 6) for v in np.arange(first, b + 1e-9, step)]
+    return [round(float(v), 6) + 0.0 for v in np.arange(first, b + 1e-9, step)]  # no "-0"
 
 
 def _legend(img: np.ndarray, items: list[tuple[str, tuple]], x: int, y: int,
@@ -188,3 +190,35 @@ def write_pictures(report: FlightReport, folder: str | Path) -> list[Path]:
     return [_write_png(folder / "path.png", path_picture(report)),
             _write_png(folder / "deviation.png", deviation_picture(report)),
             _write_png(folder / "coverage.png", coverage_picture(report))]
+
+
+def sensitivity_picture(sens: dict[str, list], title: str) -> np.ndarray:
+    """Three panels: mean and 99.9th-percentile deviation against wind speed, turbulence
+    category and positioning mode (``wtcli.fly.run.sensitivity``)."""
+    img = np.full((440, 1240, 3), 255, np.uint8)
+    cv2.putText(img, title, (70, 25), FONT, 0.55, INK, 1, cv2.LINE_AA)
+    ymax = max(p["p99_9_m"] for pts in sens.values() for p in pts) * 1.1 or 0.1
+    panels = (("wind_ms", "hub-height wind, m/s"), ("turbulence_class", "IEC turbulence category"),
+              ("positioning", "positioning"))
+    for i, (key, label) in enumerate(panels):
+        pts = sens[key]
+        x0 = 70 + i * 400
+        numeric = key == "wind_ms"
+        xs = [float(p["x"]) for p in pts] if numeric else list(range(len(pts)))
+        ax = _Axes(img, (x0, 60, x0 + 330, 360), (min(xs) - 0.5, max(xs) + 0.5), (0, ymax),
+                   title=f"deviation (m) vs {label}", xticks=numeric)
+        for name, color in (("mean_m", COLORS["automated"]), ("p99_9_m", COLORS["fixed_pattern"])):
+            xy = np.array([[x, p[name]] for x, p in zip(xs, pts)])
+            ax.line(xy, color, 2)
+            ax.dots(xy, color, 4)
+        if not numeric:
+            for x, p in zip(xs, pts):
+                px = ax.px(np.array([[x, 0.0]]))[0]
+                cv2.putText(img, str(p["x"]), (int(px[0]) - 20, 380), FONT, 0.42, INK, 1, cv2.LINE_AA)
+    _legend(img, [("mean", COLORS["automated"]), ("99.9th percentile", COLORS["fixed_pattern"])],
+            70, 415, across=True)
+    return img
+
+
+def write_sensitivity(sens: dict[str, list], folder: str | Path, title: str) -> Path:
+    return _write_png(Path(folder) / "sensitivity.png", sensitivity_picture(sens, title))

@@ -79,6 +79,8 @@ class PaperRow:
     paper: dict  # {"manual": {metric: v}, "automated": {...}}
     ours: dict  # same shape
     report: FlightReport
+    plan: Plan | None = None  # the plan flown (automated)
+    scenario: Scenario | None = None
 
     def change(self, who: str, metric: str) -> float:
         m, a = self[who]["manual"][metric], self[who]["automated"][metric]
@@ -120,7 +122,7 @@ def paper_table(names: tuple[str, ...] = PAPER_SCENARIOS, seed: int | None = Non
         paper = scn.paper or {"scenario": scn.description, "manual": {}, "automated": {}}
         rows.append(PaperRow(name=name, label=paper.get("scenario", scn.description),
                              paper={k: paper[k] for k in ("manual", "automated")}, ours=ours,
-                             report=report))
+                             report=report, plan=plan, scenario=scn))
         tick()
     return rows
 
@@ -128,3 +130,33 @@ def paper_table(names: tuple[str, ...] = PAPER_SCENARIOS, seed: int | None = Non
 def mean_changes(rows: list[PaperRow]) -> dict[str, dict[str, float]]:
     return {who: {m: float(np.mean([r.change(who, m) for r in rows])) for m in METRICS}
             for who in ("paper", "ours")}
+
+
+# ---- sensitivity of the deviation ------------------------------------------------------------
+
+SENSITIVITY_WIND_MS = (0.0, 4.0, 8.0, 12.0)
+SENSITIVITY_CLASSES = ("C", "B", "A", "A+")
+SENSITIVITY_MODES = ("rtk_fixed", "rtk_float", "gnss")
+
+
+def sensitivity(plan: Plan, scn: Scenario, progress: StageProgress | None = None) -> dict[str, list]:
+    """The automated flight's deviation from ``plan`` as one thing changes at a time, the rest
+    as ``scn`` says: the hub-height wind speed (the scenario's turbulence category, RTK fixed),
+    the IEC turbulence category (Kaimal, the scenario's wind, RTK fixed) and the positioning
+    mode (the scenario's wind). Per point: {"x", "mean_m", "p99_9_m", "max_m"}."""
+    base = replace(scn, positioning=replace(scn.positioning, mode="rtk_fixed"))
+    cases = [("wind_ms", v, replace(base, wind=replace(base.wind, speed_ms=v)))
+             for v in SENSITIVITY_WIND_MS]
+    cases += [("turbulence_class", c, replace(base, wind=replace(base.wind, turbulence_model="kaimal",
+                                                                 turbulence_sigma_ms=None,
+                                                                 turbulence_class=c)))
+              for c in SENSITIVITY_CLASSES]
+    cases += [("positioning", m, replace(scn, positioning=replace(scn.positioning, mode=m)))
+              for m in SENSITIVITY_MODES]
+    tick = stage_ticker(progress, "sensitivity", len(cases))
+    out: dict[str, list] = {"wind_ms": [], "turbulence_class": [], "positioning": []}
+    for what, x, s in cases:
+        d = fly_plan(plan, s).automated.to_dict()["deviation_m"]
+        out[what].append({"x": x, "mean_m": d["mean"], "p99_9_m": d["p99_9"], "max_m": d["max"]})
+        tick()
+    return out
