@@ -319,7 +319,7 @@ def test_evaluator_perfect_and_empty():
 def test_pitch_on_a_photo_segments_it_first(cli, tmp_path, random_weights, monkeypatch):
     """`wtinspect pitch PHOTO.jpg` runs segment -> contours -> pitch (shipped model, or
     WTINSPECT_MODEL); with random weights the rotor may not be found, but it must not crash."""
-    from wtcli.pitch import PHOTO_SUFFIXES
+    from wtcli.pitch.inputs import PHOTO_SUFFIXES
 
     if ".jpg" not in PHOTO_SUFFIXES:
         pytest.skip("pitch does not take photos")
