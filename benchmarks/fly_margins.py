@@ -30,7 +30,7 @@ from wtcli.plan.config import load_mission  # noqa: E402
 from wtcli.plan.mission import plan_mission  # noqa: E402
 
 # The tracking margin to plan with, per positioning mode (docs/fly.md "Margins").
-MARGINS = {"rtk_fixed": 1.0, "rtk_float": 1.5, "gnss": 4.0}
+MARGINS = {"rtk_fixed": 1.5, "rtk_float": 2.0, "gnss": 4.0}
 
 
 def main() -> None:
