@@ -9,6 +9,7 @@ from __future__ import annotations
 import importlib
 import os
 import pkgutil
+import re
 import sys
 import traceback
 from typing import Any, Optional
@@ -32,6 +33,12 @@ def one_line(text: str, limit: int = 400) -> str:
     return escape(text)
 
 
+# typer refuses a path argument it cannot read ("Invalid value for 'IMAGE|FOLDER': path
+# 'a.png' is not readable.") with its usage exit 2 and a box of help; an unreadable input is
+# exit 3 naming the path (docs/exit-codes.md), as when our own code finds it.
+_NOT_READABLE = re.compile(r"'(?P<path>.+)' is not readable\.$")
+
+
 def _debug(ctx: typer.Context) -> bool:
     obj = ctx.find_root().obj
     return bool(obj and obj.get("debug")) or os.environ.get("WTINSPECT_DEBUG") == "1"
@@ -50,6 +57,13 @@ class _Boundary(TyperGroup):
     def invoke(self, ctx: typer.Context) -> Any:
         try:
             return super().invoke(ctx)
+        except typer.BadParameter as e:
+            m = _NOT_READABLE.search(e.message)
+            if m is None:
+                raise
+            err_console.print(f"[red]error:[/red] {one_line(m.group('path'))}: cannot read "
+                              "(permission denied)", markup=True, soft_wrap=True)
+            ctx.exit(ExitCode.INPUT)
         except (typer.Exit, typer.Abort, typer.TyperException):
             raise
         except KeyboardInterrupt:

@@ -72,12 +72,12 @@ def find_images(path: Path, recursive: bool = False) -> tuple[Path, list[Path]]:
         raise InputError(f"{path}: not a file or folder")
     try:
         it = list(path.rglob("*") if recursive else path.iterdir())
-    except OSError as e:  # no read or no execute permission on the folder
-        raise InputError(f"{e.filename or path}: cannot list the folder ({os_reason(e)})") from None
-    # A link whose target is missing or loops is kept, so it fails visibly in the report.
-    files = sorted(p for p in it if (p.is_file() or (p.is_symlink() and not p.exists()))
-                   and p.suffix.lower() in IMAGE_SUFFIXES
-                   and not any(part.startswith(".") for part in p.relative_to(path).parts))
+        # A link whose target is missing or loops is kept, so it fails visibly in the report.
+        files = sorted(p for p in it if (p.is_file() or (p.is_symlink() and not p.exists()))
+                       and p.suffix.lower() in IMAGE_SUFFIXES
+                       and not any(part.startswith(".") for part in p.relative_to(path).parts))
+    except OSError as e:  # no read or no execute (search) permission on the folder
+        raise InputError(f"{path}: cannot list the folder ({os_reason(e)})") from None
     if not files:
         hint = "" if recursive else " (add --recursive to look in subfolders)"
         raise InputError(f"{path}: no images ({', '.join(IMAGE_SUFFIXES)}) in this folder{hint}")
