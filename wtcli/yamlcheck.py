@@ -62,8 +62,9 @@ def _expanded_size(root: yaml.Node) -> None:
             children = _children(node)
             total = 1 + sum(size[id(c)] for c in children)
             if total > MAX_YAML_VALUES:
-                raise _Refused(f"its aliases expand to over {MAX_YAML_VALUES:,} values; "
-                               "write the values out (an alias bomb is refused)", node.start_mark)
+                raise _Refused(f"holds over {MAX_YAML_VALUES:,} values once its aliases are "
+                               "expanded (an alias bomb?); a settings file needs far fewer",
+                               node.start_mark)
             size[key] = total
             continue
         if key in size:
