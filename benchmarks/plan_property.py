@@ -18,6 +18,7 @@ own timeline between stops at the launch point; each side's coverage with the pr
 at the planner's sampling and at half of it.
 
     python benchmarks/plan_property.py [N] [--start SEED] [--jobs J] [--log cases.jsonl]
+    python benchmarks/plan_property.py --from-log cases.jsonl   # summarise a logged run
 
 writes ``benchmarks/results/plan_property.json`` (``benchmarks/_results.py``: with the command,
 date and machine).
@@ -249,11 +250,15 @@ def one(seed: int, coverage: bool = True) -> dict:
         P = leg_samples(r.pos, plan.turbines, s.safe_distance_m + 2)
         worst = min(worst, independent_min_clearance(plan.turbines, P, s.safe_distance_m + 2))
     sorties = [x for r in plan.routes for x in sortie_times(r)]
+    lo, hi = fl.gimbal_pitch_range
+    aim_ok = all(lo - 1e-9 <= float(p) <= hi + 1e-9 for r in plan.routes
+                 for p in r.gimbal_pitch_deg[r.photo])
     out = {"seed": seed, "turbines": len(plan.turbines), "blades": [t.n_blades for t in plan.turbines],
            "uavs": len(fl.uavs), "gimbal_up_deg": fl.gimbal_pitch_max_deg,
            "safe_m": s.safe_distance_m, "min_clearance_m": worst,
            # leg samples LEG_STEP apart: between two the distance dips at most LEG_STEP / 2
            "clearance_violation": bool(worst - 0.5 * LEG_STEP - 0.01 < s.safe_distance_m),
+           "aim_ok": aim_ok,
            "longest_sortie_s": max(sorties), "usable_battery_s": fl.usable_battery_s,
            "battery_overrun": bool(max(sorties) > fl.usable_battery_s + 1e-6),
            "plan_seconds": round(dt, 2)}
@@ -288,12 +293,18 @@ def summarize(res: list[dict], seconds: float) -> dict:
     refused = [r for r in res if "refused" in r]
     crashes = [r for r in res if "crash" in r]
     cov = [r for r in ok if "min_side_fine" in r]
+    aimed = [r for r in ok if "aim_ok" in r]
+    clearance = sum(r["clearance_violation"] for r in ok)
+    aim = sum(not r["aim_ok"] for r in aimed)
     return {
-        "sites": len(res), "planned": len(ok), "refused": len(refused), "crashes_exit_1": len(crashes),
+        "sites": len(res), "planned": len(ok), "plan_errors": len(refused),
+        "crashes_exit_1": len(crashes),
         "refusals_not_one_line": sum(not r["one_line"] for r in refused),
-        "refusal_exit_codes": dict(Counter(r["exit"] for r in refused)),
-        "clearance_violations": sum(r["clearance_violation"] for r in ok),
-        "min_clearance_over_safe_m": min((r["min_clearance_m"] - r["safe_m"] for r in ok), default=None),
+        "refusal_exit_codes": dict(Counter(str(r["exit"]) for r in refused)),
+        "violations": clearance + aim, "clearance_violations": clearance,
+        "aim_violations": aim, "aim_checked": len(aimed),
+        "min_margin_over_safe_distance_m": min((r["min_clearance_m"] - r["safe_m"] for r in ok),
+                                               default=None),
         "battery_overruns": sum(r["battery_overrun"] for r in ok),
         "max_sortie_over_usable_s": max((r["longest_sortie_s"] - r["usable_battery_s"] for r in ok),
                                         default=None),
@@ -301,7 +312,7 @@ def summarize(res: list[dict], seconds: float) -> dict:
         "min_side_coverage_at_half_spacing": min((r["min_side_fine"] for r in cov), default=None),
         "max_side_change_spacing_to_half": max((r["refinement_change"] for r in cov), default=None),
         "turbines_planned": sum(r["turbines"] for r in ok),
-        "blade_counts": dict(Counter(b for r in ok for b in r["blades"])),
+        "blade_counts": {str(k): v for k, v in sorted(Counter(b for r in ok for b in r["blades"]).items())},
         "with_gimbal_limit": sum(r["gimbal_up_deg"] < 90 for r in ok),
         "seconds": round(seconds, 1),
         "refusals": dict(Counter(refusal_kind(r["refused"]) for r in refused).most_common()),
@@ -309,11 +320,12 @@ def summarize(res: list[dict], seconds: float) -> dict:
     }
 
 
-def _write_results(name: str, summary: dict) -> Path:
+def _write_results(name: str, summary: dict, res: list[dict]) -> Path:
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from _results import save  # the shared writer: figures with the command, date and machine
 
-    return save(name, summary, script="benchmarks/plan_property.py")
+    cases = [{k: v for k, v in r.items() if k != "trace"} for r in res]
+    return save(name, {"summary": summary, "cases": cases}, script="benchmarks/plan_property.py")
 
 
 def main() -> None:
@@ -324,8 +336,17 @@ def main() -> None:
     ap.add_argument("--no-coverage", action="store_true", help="skip the coverage re-measure")
     ap.add_argument("--log", default=None, help="append each case's result as a JSON line")
     ap.add_argument("--name", default="plan_property", help="results file name")
+    ap.add_argument("--from-log", default=None,
+                    help="summarise the cases of a --log file (a run stopped or made elsewhere) "
+                         "instead of running any")
     a = ap.parse_args()
     t0 = time.time()
+    if a.from_log:
+        res = [json.loads(line) for line in Path(a.from_log).read_text().splitlines() if line]
+        summary = summarize(res, 0.0)
+        print(json.dumps(summary, indent=1))
+        print(f"wrote {_write_results(a.name, summary, res)}")
+        return
     res = []
     from functools import partial
 
@@ -338,7 +359,7 @@ def main() -> None:
                     f.write(json.dumps({k: v for k, v in r.items() if k != "trace"}) + "\n")
     summary = summarize(res, time.time() - t0)
     print(json.dumps(summary, indent=1))
-    print(f"wrote {_write_results(a.name, summary)}")
+    print(f"wrote {_write_results(a.name, summary, res)}")
 
 
 if __name__ == "__main__":
