@@ -67,7 +67,8 @@ def test_resume_without_checkpoint_is_input_error(tmp_path):
 def test_resume_of_another_architecture_is_model_error(tmp_path):
     run = tmp_path / "run"
     run.mkdir()
-    torch.save({"arch": "wtseg-r18s-fpn128", "state_dict": {}, "iteration": 5}, run / "last.ckpt")
+    torch.save({"arch": "wtseg-r18s-fpn128", "state_dict": {}, "optimizer": {}, "iteration": 5},
+               run / "last.ckpt")
     with pytest.raises(ModelError, match="architecture 'wtseg-r18s-fpn128'.*--init"):
         train(_tiny(tmp_path, resume=True))
 
@@ -168,9 +169,9 @@ def test_synthetic_scenes_follow_the_seed(tmp_path, seed, monkeypatch):
     assert resumed == first[2]
 
 
-def test_cli_train_sizes_not_numbers_exit_3(cli, tmp_path):
-    res = cli("train", "--sizes", "384,big", "--out", tmp_path / "r")
-    assert res.exit_code == ExitCode.INPUT and "--sizes" in res.output
+def test_cli_train_sizes_not_numbers_exit_4(cli, tmp_path):
+    res = cli("train", "--sizes", "384,big", "--out", tmp_path / "r")  # a bad option value
+    assert res.exit_code == ExitCode.CONFIG and "--sizes" in res.output
 
 
 def test_cli_train_sizes_above_the_renders_exit_4(cli, tmp_path):
