@@ -292,17 +292,21 @@ def test_unreadable_photo_and_folder_exit_3_simulated(cli, photos, weights, tmp_
     assert "cannot list the folder (Permission denied)" in line
 
 
-def test_tiny_and_huge_photos_are_named(cli, weights, tmp_path):
-    one = _photo(tmp_path / "one.png", h=1, w=1)
-    one_error_line(cli("segment", one, "--out", tmp_path / "o", "--model", weights, *FAST), 3, one)
-    # a 100000 x 100000 PNG header on a few bytes: refused before decoding, within a second
+def _png_bomb(path: Path) -> Path:
+    """A PNG header declaring 100000 x 100000 pixels on a few bytes."""
     import struct
     import zlib
 
-    ihdr = struct.pack(">IIBBBBB", 100_000, 100_000, 8, 2, 0, 0, 0)
-    bomb = tmp_path / "bomb.png"
-    bomb.write_bytes(b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + b"IHDR" + ihdr
+    ihdr = struct.pack(">IIBBBBB", 100_000, 100_000, 8, 0, 0, 0, 0)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + b"IHDR" + ihdr
                      + struct.pack(">I", zlib.crc32(b"IHDR" + ihdr)) + bytes(64))
+    return path
+
+
+def test_tiny_and_huge_photos_are_named(cli, weights, tmp_path):
+    one = _photo(tmp_path / "one.png", h=1, w=1)
+    one_error_line(cli("segment", one, "--out", tmp_path / "o", "--model", weights, *FAST), 3, one)
+    bomb = _png_bomb(tmp_path / "bomb.png")
     line = one_error_line(cli("segment", bomb, "--out", tmp_path / "o", "--model", weights, *FAST),
                           3, bomb)
     assert "100000x100000" in line and "200,000,000" in line
@@ -410,6 +414,8 @@ def test_corrupt_mask_png_is_one_line(cli, tmp_path):
     bad.write_bytes(b"\x89PNG\r\n\x1a\nxxxx")  # OpenCV logs its own complaint unless silenced
     one_error_line(cli("contours", bad), 3, bad, alone=True)
     one_error_line(cli("pitch", bad), 3, bad, alone=True)
+    bomb = _png_bomb(tmp_path / "blade_bomb.png")
+    assert "100000x100000" in one_error_line(cli("contours", bomb), 3, bomb, alone=True)
 
 
 def test_number_past_float_range_and_deep_nesting(cli, instances_doc, tmp_path):

@@ -27,7 +27,8 @@ import numpy as np
 from wtcli.console import StageProgress, stage_ticker
 from wtcli.errors import InputError, PerceptionError
 from wtcli.jsonio import document, read_json, shown
-from wtcli.masks import LABELS, Instances, check_pixels, check_size, read_instances
+from wtcli.masks import (LABELS, Instances, check_declared_size, check_pixels, check_size,
+                         read_instances)
 
 CONTOURS_SCHEMA = "wtinspect.contours"
 CONTOURS_VERSION = 1
@@ -261,6 +262,7 @@ def read_mask_image(path: str | Path) -> np.ndarray:
     if not path.exists():
         raise InputError(f"{path}: file not found")
     data = np.fromfile(str(path), np.uint8) if path.is_file() else np.zeros(0, np.uint8)
+    check_declared_size(data, path)
     img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
     if img is None:
         raise InputError(f"{path}: cannot read the image (empty, truncated or not an image)")

@@ -121,6 +121,41 @@ def check_pixels(h: int, w: int, where: str) -> None:
                          f"{MAX_IMAGE_PIXELS:,} (docs/exit-codes.md)")
 
 
+def declared_size(data: np.ndarray) -> tuple[int, int] | None:
+    """(width, height) a PNG or JPEG file declares in its header, read without decoding it (so
+    a small file declaring a huge image is refused before anything is allocated); None for
+    other formats or a header too damaged to tell (the decoder then decides)."""
+    b = data[:1 << 20].tobytes()
+    if b[:8] == b"\x89PNG\r\n\x1a\n" and len(b) >= 24 and b[12:16] == b"IHDR":
+        return int.from_bytes(b[16:20], "big"), int.from_bytes(b[20:24], "big")
+    if b[:2] != b"\xff\xd8":
+        return None
+    i = 2
+    while i + 9 <= len(b):  # JPEG segments: FF marker, 2-byte length; SOFn holds H and W
+        if b[i] != 0xFF:
+            return None
+        marker = b[i + 1]
+        if marker == 0xFF:
+            i += 1
+            continue
+        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
+            return int.from_bytes(b[i + 7:i + 9], "big"), int.from_bytes(b[i + 5:i + 7], "big")
+        if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:
+            i += 2
+            continue
+        i += 2 + int.from_bytes(b[i + 2:i + 4], "big")
+    return None
+
+
+def check_declared_size(data: np.ndarray, path: str | Path) -> None:
+    """InputError naming ``path`` if its PNG/JPEG header declares more than MAX_IMAGE_PIXELS."""
+    size = declared_size(data)
+    if size is not None and size[0] * size[1] > MAX_IMAGE_PIXELS:
+        raise InputError(f"{path}: image too large to decode ({size[0]}x{size[1]} is "
+                         f"{size[0] * size[1]:,} pixels, over the limit of {MAX_IMAGE_PIXELS:,}, "
+                         "docs/exit-codes.md); downscale it first")
+
+
 def mask_box(mask: np.ndarray) -> np.ndarray:
     ys, xs = np.nonzero(mask)
     if len(xs) == 0:
