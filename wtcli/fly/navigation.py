@@ -13,11 +13,11 @@ rtk_fixed   0.01 / 0.015          300                 0.01 / 0.015   DJI M300 RT
                                                                         vertical (fixed solution)
 rtk_float   0.25 / 0.40           120                 0.05 / 0.08    decimetre level (RTK float,
                                                                         DJI's RtkFlag 32-49)
-gnss        1.0 / 1.5             300                 0.15 / 0.25    DJI M300 hover accuracy with
+gnss        1.0 / 0.5             300                 0.15 / 0.10    DJI M300 hover accuracy with
                                                                         GPS: +-1.5 m h, +-0.5 m v
-                                                                        (barometer-aided); single-
-                                                                        point GNSS wanders ~1 m
-                                                                        over minutes
+                                                                        (height barometer-aided);
+                                                                        single-point GNSS wanders
+                                                                        ~1 m over minutes
 ideal       0 / 0                 -                   vehicle.position_noise_m
 ==========  ====================  ==================  =============  =========================
 
@@ -42,7 +42,7 @@ MODES = ("rtk_fixed", "rtk_float", "gnss", "ideal")
 ERROR_MODEL: dict[str, tuple[float, float, float, float, float]] = {
     "rtk_fixed": (0.01, 0.015, 300.0, 0.01, 0.015),
     "rtk_float": (0.25, 0.40, 120.0, 0.05, 0.08),
-    "gnss": (1.0, 1.5, 300.0, 0.15, 0.25),
+    "gnss": (1.0, 0.5, 300.0, 0.15, 0.10),
 }
 
 
