@@ -552,3 +552,12 @@ def test_train_options_and_damaged_checkpoint(cli, tmp_path):
     line = one_error_line(cli("train", "--out", run, "--resume", "--iterations", "1",
                               "--device", "cpu"), 7, run / "last.ckpt")
     assert "state_dict" in line
+
+
+def test_names_in_square_brackets_are_printed_as_written(cli, tmp_path):
+    out = tmp_path / "[red]c[/red] [1].json"
+    r = cli("contours", SAMPLE / "instances.json", "--out", out)
+    # (rich wraps this note at 80 columns: compare with the line breaks taken out)
+    assert r.exit_code == 0 and " ".join(f"-> {out}".split()) in " ".join(r.stderr.split()), r.stderr
+    missing = tmp_path / "[bold]gone[/bold].json"
+    one_error_line(cli("contours", missing), 3, missing, alone=True)

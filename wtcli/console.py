@@ -11,7 +11,10 @@ from rich.console import Console
 from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                            TimeElapsedColumn, TimeRemainingColumn)
 
-err_console = Console(stderr=True, highlight=False)
+# Markup off: what we print names files and quotes inputs, and "[1]" in a photo's name or
+# "[.nan, 0, 0]" in a value must come out as written. A line that wants colour says
+# markup=True and escapes what it quotes (rich.markup.escape).
+err_console = Console(stderr=True, highlight=False, markup=False)
 
 
 def make_progress(transient: bool = False) -> Progress:

@@ -167,13 +167,14 @@ def register(app: typer.Typer) -> None:
         else:
             _console().print(_flight_table(report))
         for note in report.notes:
-            err_console.print(f"note: {escape(note)}")
+            err_console.print(f"note: {note}")
         warnings = report.warnings()
         for w in warnings[:MAX_WARNINGS]:
-            err_console.print(f"[yellow]warning:[/yellow] {escape(w)}")
+            err_console.print(f"[yellow]warning:[/yellow] {escape(w)}", markup=True)
         if len(warnings) > MAX_WARNINGS:
             err_console.print(f"[yellow]warning:[/yellow] and {len(warnings) - MAX_WARNINGS} more "
-                              "(all in the report: preflight, flights.*.clearance.violations)")
+                              "(all in the report: preflight, flights.*.clearance.violations)",
+                              markup=True)
         viol = report.preflight + report.automated.violations
         if viol and fail_on_violation:
             kinds = sorted({v.kind for v in viol})

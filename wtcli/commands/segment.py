@@ -83,9 +83,9 @@ def segment(
     shown = results if len(results) <= 40 else [r for r in results if r.status == "error"][:40]
     for r in shown:
         c = r.counts
-        table.add_row(r.rel, "[red]error[/red]" if r.status == "error" else r.status,
+        table.add_row(r.rel, r.status,
                       str(c.get("blade", "")), str(c.get("tower", "")), str(c.get("nacelle", "")),
-                      (r.error or "")[:80])
+                      (r.error or "")[:80], style="red" if r.status == "error" else None)
     err_console.print(table)
     bad = report["n_failed"]
     err_console.print(f"{len(results) - bad}/{len(results)} image(s) segmented"
