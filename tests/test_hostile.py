@@ -499,7 +499,7 @@ def test_plan_options(cli, tmp_path):
                           4, "--camera-pose")
     assert "'inf,0,0,0,0,80'" in line
     inst = SAMPLE / "instances.json"
-    line = one_error_line(cli("plan", SAMPLE / "turbines.yaml", f"T9={inst}"), 3, f"T9={inst}")
+    line = one_error_line(cli("plan", SAMPLE / "turbines.yaml", f"T9={inst}"), 2, f"T9={inst}")
     assert "no turbine 'T9'" in line and "T1, T2" in line
 
 

@@ -26,7 +26,7 @@ def _parse(arg: str, ids: set[str]) -> tuple[str | None, Path]:
         if tid in ids:
             return tid, Path(path)
         if not Path(arg).exists() and "/" not in tid:  # ID=FILE with an ID the YAML lacks
-            raise InputError(f"{arg}: no turbine {tid!r} in the turbines YAML (its ids: {', '.join(sorted(ids))})")
+            raise UsageError(f"{arg}: no turbine {tid!r} in the turbines YAML (its ids: {', '.join(sorted(ids))})")
     return None, Path(arg)
 
 
