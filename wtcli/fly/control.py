@@ -19,7 +19,7 @@ navigation estimate of position and velocity (what an autopilot sees) and the tr
 (what a pilot's eye sees, before their own misjudgement). The loop asks each controller whether
 it ``feeds_acceleration`` (adds the reference acceleration to the thrust) and whether it
 ``holds_position`` (then drifting ``divergence_m`` from the set-point is a failed flight).
-The arithmetic is written out per axis on floats: these run 50 times per simulated second.
+The arithmetic is written out per axis on floats: step() is called 50 times per simulated second.
 """
 
 from __future__ import annotations
