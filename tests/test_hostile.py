@@ -561,3 +561,18 @@ def test_names_in_square_brackets_are_printed_as_written(cli, tmp_path):
     assert r.exit_code == 0 and " ".join(f"-> {out}".split()) in " ".join(r.stderr.split()), r.stderr
     missing = tmp_path / "[bold]gone[/bold].json"
     one_error_line(cli("contours", missing), 3, missing, alone=True)
+
+
+def test_corrupt_refiner_weights_are_refused(cli, photos, weights, tmp_path):
+    from wtcli.segment.refine import ARCH, Refiner
+
+    ref = Refiner((8, 4))
+    state = {k: v.clone() for k, v in ref.state_dict().items()}
+    next(v for v in state.values() if v.is_floating_point()).view(-1)[0] = float("nan")
+    nan = tmp_path / "nan-refiner.pt"
+    torch.save({"arch": ARCH, "hidden": [8, 4], "state_dict": state}, nan)
+    wide = tmp_path / "wide-refiner.pt"  # would allocate a 10^9-wide layer before any check
+    torch.save({"arch": ARCH, "hidden": [10**9], "state_dict": {}}, wide)
+    for bad, says in ((nan, "NaN or infinite"), (wide, "are not 1..8192")):
+        r = cli("segment", photos, "--out", tmp_path / "o", "--model", weights, "--refiner", bad)
+        assert says in one_error_line(r, 7, bad)

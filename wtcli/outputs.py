@@ -27,7 +27,8 @@ _TEMP_NAME = re.compile(r"^\..+\.(json|png|pt|ckpt|csv|kml|kmz|plan|waypoints|tx
 
 
 def writable_folder(folder: str | Path, what: str = "--out") -> Path:
-    """Create ``folder`` if needed and prove a file can be written in it; OutputError
+    """Prove files can be written in ``folder``: in it if it exists, else in the nearest
+    folder above it that does (where it would be created; nothing is created now). OutputError
     (exit 3) naming it otherwise. Call before any expensive work."""
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
@@ -41,8 +42,13 @@ def writable_folder(folder: str | Path, what: str = "--out") -> Path:
 
 
 def _probe(folder: Path) -> None:
-    folder.mkdir(parents=True, exist_ok=True)
-    fd, probe = tempfile.mkstemp(prefix=".wtinspect-probe.", dir=folder)
+    """Write and remove a file in ``folder``, or in its nearest existing ancestor."""
+    existing = folder
+    while not existing.exists() and existing.parent != existing:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, f"{existing} is a file, not a folder")
+    fd, probe = tempfile.mkstemp(prefix=".wtinspect-probe.", dir=existing)
     os.close(fd)
     os.unlink(probe)
 
@@ -59,8 +65,7 @@ def writable_file(path: str | Path, what: str = "--out") -> Path:
     try:
         _probe(parent)
     except OSError as e:
-        raise OutputError(f"{path}: cannot write ({_reason(e)} in {parent}); choose another "
-                          f"{what}") from None
+        raise OutputError(f"{path}: cannot write ({_reason(e)}); choose another {what}") from None
     return path
 
 
@@ -96,6 +101,8 @@ def remove_stale(path: str | Path) -> None:
 
 
 def _reason(e: OSError) -> str:
+    if e.errno == errno.ENOTDIR:
+        return e.strerror or "not a folder"
     if e.errno in (errno.EACCES, errno.EPERM):
         return "permission denied"
     if e.errno == errno.EROFS:

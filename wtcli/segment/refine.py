@@ -292,11 +292,17 @@ def load_refiner(path: str | Path | None = None, precision: str | None = None) -
             hint = ("; an earlier wtinspect's refiner: train one anew with `wtinspect train-refiner`"
                     if isinstance(got, str) and got.startswith("wtrefine") else "")
             raise ModelError(f"{p}: not refiner weights of architecture {ARCH!r} (found {got!r}){hint}")
-        ref = Refiner(tuple(blob.get("hidden", (256, 128))))
+        hidden = blob.get("hidden", (256, 128))
+        if not isinstance(hidden, (list, tuple)) or not 1 <= len(hidden) <= 8 or not all(
+                isinstance(h, int) and 1 <= h <= 8192 for h in hidden):  # sized before allocating
+            raise ModelError(f"{p}: refiner layer widths {str(hidden)[:80]} are not 1..8192")
+        ref = Refiner(tuple(hidden))
         try:
             ref.load_state_dict({k: v.float() for k, v in blob["state_dict"].items()})
         except (RuntimeError, KeyError, AttributeError) as e:
             raise ModelError(f"{p}: refiner weights do not fit ({str(e).splitlines()[0][:160]})") from None
+        if not all(torch.isfinite(v).all() for v in ref.state_dict().values() if v.is_floating_point()):
+            raise ModelError(f"{p}: refiner weights are corrupt (NaN or infinite values)")
         ref.eval()
         ref.precision = prec
         ref.meta = blob.get("meta", {}) if isinstance(blob.get("meta"), dict) else {}
