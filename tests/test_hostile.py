@@ -576,3 +576,33 @@ def test_corrupt_refiner_weights_are_refused(cli, photos, weights, tmp_path):
     for bad, says in ((nan, "NaN or infinite"), (wide, "are not 1..8192")):
         r = cli("segment", photos, "--out", tmp_path / "o", "--model", weights, "--refiner", bad)
         assert says in one_error_line(r, 7, bad)
+
+
+@pytest.fixture(scope="module")
+def pitch_file(tmp_path_factory) -> dict:
+    from typer.testing import CliRunner
+
+    from wtcli.cli import app
+
+    out = tmp_path_factory.mktemp("p") / "pitch.json"
+    r = CliRunner().invoke(app, ["pitch", str(SAMPLE / "instances.json"), "--out", str(out)])
+    assert r.exit_code == 0, r.stderr
+    return json.loads(out.read_text())
+
+
+PITCH_CASES = {
+    "version9": (lambda d: d.update(schema_version=9), "schema_version 9"),
+    "images_5": (lambda d: d.update(images=5), "expected an 'images' list"),
+    "image_5": (lambda d: d["images"].__setitem__(0, 5), "images[0] is not an object"),
+    "theta_1e300": (lambda d: d["images"][0]["blades"][0].update(theta_deg=1e300), "theta_deg"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(PITCH_CASES))
+def test_hostile_pitch_json_given_to_plan(cli, pitch_file, tmp_path, case):
+    edit, says = PITCH_CASES[case]
+    src = _write(tmp_path / f"{case}.json", _edited(pitch_file, edit))
+    out = tmp_path / "plan.json"
+    line = one_error_line(cli("plan", SAMPLE / "turbines.yaml", f"T1={src}", "--out", out), 3, src)
+    assert says in line, line
+    assert not out.exists()

@@ -150,7 +150,11 @@ def read_pitch(path: str | Path) -> list[tuple[PitchResult | None, str | None, d
     path = Path(path)
     doc = read_json(path, PITCH_SCHEMA, PITCH_VERSION)
     out = []
-    for i, d in enumerate(doc.get("images") or []):
+    if not isinstance(doc.get("images"), list):
+        raise InputError(f"{path}: expected an 'images' list")
+    for i, d in enumerate(doc["images"]):
+        if not isinstance(d, dict):
+            raise InputError(f"{path}: images[{i}] is not an object")
         img = d.get("image") or {}
         if d.get("error"):
             out.append((None, str(d["error"]), img))
