@@ -384,6 +384,8 @@ CONTOURS_CASES = {
                    "over the limit of 200,000,000"),
     "instances_5": (lambda d: d["images"][0].update(instances=5), "instances: expected a list, got 5"),
     "score_7": (lambda d: d["images"][0]["instances"][0].update(score=7), "expected score in [0, 1]"),
+    "image_5": (lambda d: d["images"][0].update(image=5), "images[0].image: expected an object, got 5"),
+    "images_5": (lambda d: d.update(images=5), "expected an 'images' list"),
 }
 
 

@@ -414,6 +414,8 @@ def read_contours(path: str | Path) -> list[tuple[ContourSet | None, str | None,
         if not isinstance(d, dict):
             raise InputError(f"{path}: images[{i}] is not an object")
         img = d.get("image") or {}
+        if not isinstance(img, dict):
+            raise InputError(f"{path}: images[{i}].image: expected an object, got {shown(img)}")
         if d.get("error"):
             out.append((None, str(d["error"]), img))
             continue
