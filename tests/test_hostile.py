@@ -386,6 +386,8 @@ CONTOURS_CASES = {
     "score_7": (lambda d: d["images"][0]["instances"][0].update(score=7), "expected score in [0, 1]"),
     "image_5": (lambda d: d["images"][0].update(image=5), "images[0].image: expected an object, got 5"),
     "images_5": (lambda d: d.update(images=5), "expected an 'images' list"),
+    # a source that is not a path used to fail (exit 1) before the file was checked
+    "source_5": (lambda d: d.update(source=5, images=5), "expected an 'images' list"),
 }
 
 

@@ -113,7 +113,7 @@ def is_photo(path: Path) -> bool:
 
 def _from_contours_file(path: Path, area_threshold: float | None) -> list[PitchInput]:
     out = []
-    doc_source = read_json(path).get("source", "")
+    doc_source = str(read_json(path).get("source") or "")  # a hand-edited file may hold anything
     src_dir = Path(doc_source).parent if doc_source else Path(".")
     for cs, err, img in read_contours(path):
         cands = _image_candidates(img, src_dir, path.parent / src_dir, path.parent)
