@@ -359,6 +359,8 @@ INSTANCES_CASES = {
                     "got 1000000000000.0"),
     "list_image_id": (lambda d: d["annotations"][0].update(image_id=[1]), "got [1]"),
     "category_9": (lambda d: d["annotations"][0].update(category_id=9), "category_id"),
+    "file_name_5": (lambda d: d["images"][0].update(file_name=5), "file_name: expected a file name"),
+    "file_name_long": (lambda d: d["images"][0].update(file_name="x" * 5000), "got 'xxxxx"),
 }
 
 

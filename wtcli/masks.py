@@ -313,6 +313,11 @@ def read_instances(path: str | Path) -> list[tuple[dict, Instances]]:
             iid = img["id"]
             if isinstance(iid, bool) or not isinstance(iid, (int, str)):
                 raise ValueError(f"id: expected an integer, got {shown(iid)}")
+            for key in ("file_name", "path"):  # later joined to folders, shown, written
+                v = img.get(key)
+                if v is not None and (not isinstance(v, str) or len(v) > 1024 or "\0" in v):
+                    raise ValueError(f"{key}: expected a file name (text, at most 1024 "
+                                     f"characters), got {shown(v)}")
         except (TypeError, ValueError) as e:
             raise InputError(f"{path}: images[{i}].{e}") from None
         out.append((img, Instances.from_annotations(by_image.get(iid, []), h, w,
