@@ -366,7 +366,7 @@ def parse_wpml(text: str, template: bool) -> dict:
     for k, pm in enumerate(f.findall(KML + "Placemark")):
         lon, lat = (float(x) for x in _text(pm.find(KML + "Point"), "coordinates", KML).split(","))
         assert -90 <= lat <= 90 and -180 <= lon <= 180
-        assert int(_text(pm, "index")) == k, "indices run 0, 1, 2, ... with no gap"
+        assert int(_text(pm, "index")) == k, "indices count up from 0 with no gap"
         if template:
             h = float(_text(pm, "height"))
             assert float(_text(pm, "ellipsoidHeight")) == h
@@ -388,7 +388,7 @@ def parse_wpml(text: str, template: bool) -> dict:
         actions = []
         for g in pm.findall(WPML + "actionGroup"):
             gid = int(_text(g, "actionGroupId"))
-            assert gid == len(groups), "action group ids run 0, 1, 2, ..."
+            assert gid == len(groups), "action group ids count up from 0"
             groups.add(gid)
             assert int(_text(g, "actionGroupStartIndex")) == int(_text(g, "actionGroupEndIndex")) == k
             assert _text(g, "actionGroupMode") == "sequence"
