@@ -180,7 +180,12 @@ SECTIONS: tuple[Section, ...] = (
         (F("cases planned / refused", ("summary.planned", "summary.plan_errors"), "{} / {}"),
          F("clearance or gimbal violations", ("summary.violations",), "{}", "0"),
          F("smallest margin over the safe distance", ("summary.min_margin_over_safe_distance_m",),
-           "{:.2f} m", "≥ 0")),
+           "{:.2f} m", "≥ 0"),
+         F("crashes (exit 1) / battery-reserve overruns",
+           ("summary.crashes_exit_1", "summary.battery_overruns"), "{} / {}", "0 / 0"),
+         F("plans with a side below min_side_coverage at half the sampling (lowest side)",
+           ("summary.plans_with_a_side_short_at_half_spacing", "summary.min_side_coverage_at_half_spacing"),
+           "{} ({:.1%})", "0")),
         adopt='save("plan_property", {"summary": summary, "cases": res})'),
     Section(
         "Flight: the paper's scenarios", "fly_paper_table",
