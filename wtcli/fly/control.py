@@ -25,6 +25,7 @@ The arithmetic is written out per axis on floats: step() is called 50 times per 
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,7 +57,7 @@ class VelocityLimits:
         return cx, cy, cz, sat
 
 
-class Controller:
+class Controller(ABC):
     """What the flight loop needs of a controller (see the module docstring)."""
 
     name = "controller"
@@ -66,9 +67,10 @@ class Controller:
     def reset(self) -> None:
         """Forget all state: the next ``step`` is the first of a new flight."""
 
+    @abstractmethod
     def step(self, k: int, pos: tuple[float, float, float], vel: tuple[float, float, float],
              true_pos: tuple[float, float, float]) -> tuple[float, float, float]:
-        raise NotImplementedError
+        """The acceleration command at control step ``k`` from the estimated state."""
 
 
 class PidController(Controller):
