@@ -163,6 +163,13 @@ SECTIONS: tuple[Section, ...] = (
            "{:.1%} against {:.1%}")),
         adopt='save("plan_benchmark", res)'),
     Section(
+        "Photo to plan latency", "plan_latency",
+        "python benchmarks/plan_latency.py",
+        "`wtinspect plan sample_images/turbines.yaml T1=PHOTO` in a fresh process (imports, model "
+        "load, segmentation, pitch, planning, writing), after one warm-up run.",
+        (F("wall time, median of the runs", ("median_s",), "{:.2f} s", "< 2 s"),),
+        adopt='save("plan_latency", {"median_s": ..., "runs_s": ...})'),
+    Section(
         "Coverage", "plan_coverage",
         "python benchmarks/plan_coverage.py",
         "The planner's predicted coverage of every blade side over random single turbines, with "
