@@ -13,7 +13,7 @@ import torch
 
 from wtcli.errors import ExitCode, InputError, ModelError
 from wtcli.masks import LABELS, Instances, read_instances
-from wtcli.segment import infer
+from wtcli.segment import batch, infer
 from wtcli.segment.evaluate import Evaluator, average_precision, mask_iou
 from wtcli.segment.model import ARCH, build_model, load_weights, save_weights
 
@@ -291,6 +291,74 @@ def test_segment_resume_skips_finished(cli, photo_folder, random_weights, tmp_pa
     assert status == {"a.png": "skipped", "b.jpg": "ok"}
     assert done.stat().st_mtime_ns == before
     assert len(read_instances(out / "instances.json")) == 2
+
+
+def _found(labels, scores=None):
+    m = np.zeros((len(labels), 8, 8), bool)
+    return batch.found_in(Instances(np.array(labels, dtype=object), m, scores))
+
+
+@pytest.mark.parametrize("labels, want", [
+    (["blade", "blade", "blade", "tower", "nacelle"], "rotor"),
+    (["blade", "blade"], "rotor"),                     # a rotor seen without its hub
+    (["blade", "nacelle"], "rotor"),                   # one blade on its nacelle
+    (["blade"], "single_blade"),                       # a close-up
+    (["blade", "tower"], "single_blade"),
+    (["tower"], "tower_only"),
+    (["nacelle", "tower"], "tower_only"),
+    (["nacelle"], "tower_only"),
+    ([], "nothing"),
+])
+def test_found_in_names_what_a_photo_holds(labels, want):
+    assert _found(labels) == want
+
+
+def test_found_in_counts_only_instances_at_the_score_threshold():
+    assert _found(["blade", "blade", "nacelle"], [0.9, 0.3, 0.4]) == "single_blade"
+    assert _found(["tower"], [0.49]) == "nothing"
+    m = np.zeros((2, 8, 8), bool)
+    low = Instances(np.array(["blade", "blade"], dtype=object), m, np.array([0.9, 0.3]))
+    assert batch.found_in(low, score_threshold=0.2) == "rotor"
+
+
+def test_one_blade_close_up_is_a_result(cli, tmp_path, random_weights, monkeypatch):
+    """A photo with one blade and no hub is ok: instances, I_t and overlay written; the batch
+    counts photos by what was found."""
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    for name in ("close.png", "empty.png", "rotor.png"):
+        cv2.imwrite(str(folder / name), _image(seed=4))
+
+    def fake(img, net, score_threshold, *args, **kwargs):
+        h, w = img.shape[:2]
+        m = np.zeros((1, h, w), bool)
+        m[0, 10:110, 60:90] = True  # a blade filling the frame top to bottom
+        blade = Instances(np.array(["blade"], dtype=object), m, np.array([0.9]))
+        name = fake.names.pop(0)
+        if name == "empty.png":
+            return Instances.empty(h, w)
+        if name == "rotor.png":
+            m2 = np.zeros((2, h, w), bool)
+            m2[0, 5:60, 70:80] = m2[1, 60:70, 80:150] = True
+            return Instances(np.array(["blade", "blade"], dtype=object), m2, np.array([0.8, 0.7]))
+        return blade
+    fake.names = ["close.png", "empty.png", "rotor.png"]
+    monkeypatch.setattr(infer, "segment_image", fake)
+    out = tmp_path / "seg"
+    res = cli("segment", folder, "--out", out, "--model", random_weights, "--no-refine", "--json")
+    assert res.exit_code == 0, res.stderr
+    report = json.loads(res.stdout)
+    close = next(r for r in report["images"] if r["file"] == "close.png")
+    assert close["status"] == "ok" and close["error"] is None and close["found"] == "single_blade"
+    assert close["counts"] == {"blade": 1, "tower": 0, "nacelle": 0}
+    assert report["n_found"] == {"rotor": 1, "single_blade": 1, "tower_only": 0, "nothing": 1}
+    assert json.loads((out / "report.json").read_text())["n_found"] == report["n_found"]
+    (_, inst), = read_instances(out / "instances" / "close.json")
+    assert list(inst.labels) == ["blade"]
+    it = cv2.imread(str(out / "background_removed" / "close.png"))
+    assert it[:, :60].max() == 0 and it[10:110, 60:90].max() > 0  # I_t: the blade alone
+    assert cv2.imread(str(out / "overlay" / "close.png")).shape == (120, 160, 3)
+    assert "found: 1 rotor, 1 single blade, 0 tower only, 1 nothing" in res.stderr
 
 
 def test_segment_image_api_uses_given_model(random_model):

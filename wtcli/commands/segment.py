@@ -52,7 +52,7 @@ def segment(
     from wtcli.console import count_bar, err_console
     from wtcli.errors import InputError, PartialFailure
     from wtcli.jsonio import dumps
-    from wtcli.segment.batch import find_images, segment_paths, write_batch_files
+    from wtcli.segment.batch import FOUND, find_images, segment_paths, write_batch_files
     from wtcli.segment.infer import load_model, segment_image
     from wtcli.segment.model import resolve_weights
     from wtcli.segment.refine import load_refiner, resolve_refiner
@@ -71,19 +71,22 @@ def segment(
 
     with count_bar("segment", len(files)) as advance:
         results = segment_paths(path, out, run, recursive=recursive, resume=resume,
-                                on_progress=lambda res: advance(f"{res.rel} {res.status}"))
+                                on_progress=lambda res: advance(f"{res.rel} {res.status}"),
+                                score_threshold=score_threshold)
     settings = {"score_threshold": score_threshold, "max_size": max_size, "zoom": zoom, "flip": flip,
                 "model": str(weights), "refiner": str(resolve_refiner(refiner)) if refine else None,
                 "device": str(next(net.parameters()).device), "precision": net.precision}
     report = write_batch_files(out, results, settings)
 
-    table = Table(title=f"segment -> {out}/", title_justify="left")
-    for col in ("file", "status", "blades", "towers", "nacelles", "note"):
+    found = report["n_found"]  # photos by what they hold: rotor, single blade, tower only, nothing
+    table = Table(title=f"segment -> {out}/", title_justify="left", caption_justify="left",
+                  caption="found: " + ", ".join(f"{found[k]} {k.replace('_', ' ')}" for k in FOUND))
+    for col in ("file", "status", "found", "blades", "towers", "nacelles", "note"):
         table.add_column(col)
     shown = results if len(results) <= 40 else [r for r in results if r.status == "error"][:40]
     for r in shown:
         c = r.counts
-        table.add_row(r.rel, r.status,
+        table.add_row(r.rel, r.status, (r.found or "").replace("_", " "),
                       str(c.get("blade", "")), str(c.get("tower", "")), str(c.get("nacelle", "")),
                       (r.error or "")[:80], style="red" if r.status == "error" else None)
     err_console.print(table)

@@ -8,7 +8,8 @@ For each image ``REL`` (its path relative to the input folder, or its name), und
 - ``overlay/REL.png``: the photo with the instances drawn on it;
 
 and once the batch ends, ``instances.json`` (every finished image in one COCO file, ready for
-``contours`` and ``pitch``) and ``report.json`` (per file: ok / error, counts, outputs).
+``contours`` and ``pitch``) and ``report.json`` (per file: ok / error, counts, what was found,
+outputs; and how many photos held a rotor, a single blade, a tower only or nothing).
 Every file is written atomically. A failing image is recorded and the batch goes on; a broken
 or looping symbolic link to an image is such a failure too, not skipped. Each run first removes
 temporaries a kill left (``.NAME.XXXXXXXX``); ``--resume`` redoes an image whose instances file
@@ -30,10 +31,26 @@ from wtcli.jsonio import atomic_write_bytes, document, os_reason, write_json
 from wtcli.outputs import remove_stale, remove_temp_files
 from wtcli.masks import (LABELS, Instances, check_declared_size, instances_document, read_instances,
                          write_instances)
+from wtcli.segment.defaults import DEFAULT_SCORE_THRESHOLD
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff")
 REPORT_SCHEMA = "wtinspect.segment_report"
 MAX_DECODE_PIXELS = 1 << 30  # OpenCV's CV_IO_MAX_IMAGE_PIXELS default
+FOUND = ("rotor", "single_blade", "tower_only", "nothing")  # what a photo holds (found_in)
+
+
+def found_in(inst: Instances, score_threshold: float = DEFAULT_SCORE_THRESHOLD) -> str:
+    """What a photo holds, from its instances scoring at least ``score_threshold``:
+    ``rotor`` (two or more blades, or a nacelle with a blade), ``single_blade`` (exactly one
+    blade and no nacelle: a close-up), ``tower_only`` (a tower or nacelle, no blade) or
+    ``nothing``."""
+    labels = list(inst.labels[inst.scores >= score_threshold])
+    blades, nacelle = labels.count("blade"), "nacelle" in labels
+    if blades >= 2 or (blades == 1 and nacelle):
+        return "rotor"
+    if blades == 1:
+        return "single_blade"
+    return "tower_only" if labels else "nothing"
 
 
 @dataclass
@@ -43,6 +60,7 @@ class ImageResult:
     status: str  # "ok" | "skipped" (resumed) | "error"
     error: str | None = None
     counts: dict[str, int] = field(default_factory=dict)
+    found: str | None = None  # one of FOUND; None for an error
     width: int = 0
     height: int = 0
     instances: Instances | None = None
@@ -51,6 +69,7 @@ class ImageResult:
         d = {"file": self.rel, "source": self.source, "status": self.status, "error": self.error,
              "counts": self.counts, "width": self.width, "height": self.height}
         if self.status != "error":
+            d["found"] = self.found
             d["outputs"] = {k: str(v) for k, v in output_paths(out, self.rel).items()}
         return d
 
@@ -134,8 +153,10 @@ def counts_of(inst: Instances) -> dict[str, int]:
 
 def segment_paths(path: Path, out: Path, segment: Callable[[np.ndarray], Instances],
                   recursive: bool = False, resume: bool = False,
-                  on_progress: Callable[[ImageResult], None] | None = None) -> list[ImageResult]:
-    """Run ``segment`` (BGR image -> Instances) over an image or folder, writing the files above."""
+                  on_progress: Callable[[ImageResult], None] | None = None,
+                  score_threshold: float = DEFAULT_SCORE_THRESHOLD) -> list[ImageResult]:
+    """Run ``segment`` (BGR image -> Instances) over an image or folder, writing the files above;
+    ``score_threshold`` is the one ``segment`` kept instances at (for ``found_in``)."""
     root, files = find_images(path, recursive)
     remove_temp_files(out)
     results: list[ImageResult] = []
@@ -161,6 +182,7 @@ def segment_paths(path: Path, out: Path, segment: Callable[[np.ndarray], Instanc
                 # The instances file last: its presence marks the image as done for --resume.
                 write_instances(outs["instances"], [_image_record(1, rel, f, res)], [inst])
             res.counts = counts_of(res.instances)
+            res.found = found_in(res.instances, score_threshold)
         except WtError as e:
             res.status, res.error, res.instances = "error", _naming(str(e), f), None
         except OSError as e:
@@ -212,11 +234,13 @@ def write_batch_files(out: Path, results: list[ImageResult], settings: dict[str,
         "images": [r.to_dict(out) for r in results],
         "n_images": len(results), "n_failed": sum(r.status == "error" for r in results),
         "n_skipped": sum(r.status == "skipped" for r in results),
+        # Added within schema_version 1 (an optional field; readers of older reports ignore it).
+        "n_found": {k: sum(r.found == k for r in results if r.status != "error") for k in FOUND},
         "instances": str(out / "instances.json") if done else None,
     })
     write_json(out / "report.json", report)
     return report
 
 
-__all__ = ["IMAGE_SUFFIXES", "ImageResult", "find_images", "output_paths", "read_image",
-           "segment_paths", "write_batch_files", "instances_document"]
+__all__ = ["FOUND", "IMAGE_SUFFIXES", "ImageResult", "found_in", "find_images", "output_paths",
+           "read_image",           "segment_paths", "write_batch_files", "instances_document"]
