@@ -243,4 +243,4 @@ def write_batch_files(out: Path, results: list[ImageResult], settings: dict[str,
 
 
 __all__ = ["FOUND", "IMAGE_SUFFIXES", "ImageResult", "found_in", "find_images", "output_paths",
-           "read_image",           "segment_paths", "write_batch_files", "instances_document"]
+           "read_image", "segment_paths", "write_batch_files", "instances_document"]
