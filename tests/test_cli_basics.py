@@ -57,3 +57,31 @@ def test_ctrl_c_exits_130(runner):
         raise KeyboardInterrupt
 
     assert runner.invoke(_app_with(interrupt), ["go"]).exit_code == 130
+
+
+def _run_into_closed_pipe(*args: str):
+    """Run ``wtinspect ARGS`` with stdout a pipe whose reader is already gone (what
+    ``wtinspect --help | head -1`` becomes once ``head`` has its line): every write fails."""
+    import os
+    import subprocess
+    import sys
+
+    r, w = os.pipe()
+    os.close(r)
+    try:
+        return subprocess.run([sys.executable, "-m", "wtcli", *args], stdout=w,
+                              stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(w)
+
+
+def test_help_into_a_closed_pipe_exits_0_quietly():
+    for args in (["--help"], ["plan", "--help"], ["--version"]):
+        done = _run_into_closed_pipe(*args)
+        assert done.returncode == 0, (args, done.returncode, done.stderr)
+        assert done.stderr == "", (args, done.stderr)
+
+
+def test_a_usage_error_keeps_exit_2_when_stdout_is_a_closed_pipe():
+    done = _run_into_closed_pipe("no-such-command")  # the error goes to stderr, still open
+    assert done.returncode == 2 and "no-such-command" in done.stderr

@@ -22,6 +22,12 @@ from wtcli import __version__
 from wtcli.console import err_console
 from wtcli.errors import ExitCode, WtError
 
+# torch's OpenMP threads (one per core) spin at every barrier by default: with one of two cores
+# busy elsewhere, a forward pass of the segmenter took 1.2-5.8 s instead of 0.4 s. Passive
+# threads sleep instead: 0.74 s then, 0.43 s on an idle CPU (benchmarks, docs/benchmarks.md).
+# Read when torch loads, so set before any command imports it; a user's setting wins.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 
 def one_line(text: str, limit: int = 400) -> str:
     """An error message as printed: one line (newlines folded), at most ``limit`` characters,
@@ -154,5 +160,35 @@ def _register_commands() -> None:
 _register_commands()
 
 
+def _stdout_gone(before: os.stat_result | None) -> bool:
+    """Whether the exit-1 just raised was a write to a stdout whose reader went away
+    (``wtinspect --help | head -1``): rich then points stdout at /dev/null before exiting 1,
+    click wraps sys.stdout in its PacifyFlushWrapper. Any other exit keeps its code."""
+    if type(sys.stdout).__name__ == "PacifyFlushWrapper":
+        return True
+    try:
+        now = os.fstat(sys.__stdout__.fileno())
+        return (before is not None and not os.path.samestat(before, now)
+                and os.path.samestat(now, os.stat(os.devnull)))
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
 def main(argv: list[str] | None = None) -> None:
-    app(args=argv if argv is not None else sys.argv[1:], prog_name="wtinspect")
+    try:
+        before = os.fstat(sys.__stdout__.fileno())
+    except (OSError, ValueError, AttributeError):
+        before = None
+    try:
+        app(args=argv if argv is not None else sys.argv[1:], prog_name="wtinspect")
+    except SystemExit as e:
+        # Output cut short by its reader, as `head` does, is not a failure: exit 0 quietly,
+        # as standard tools do (help and --version are printed before any command runs, so
+        # _Boundary's own BrokenPipeError case does not see them).
+        if e.code == 1 and _stdout_gone(before):
+            try:
+                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.__stdout__.fileno())
+            except (OSError, ValueError, AttributeError):
+                pass
+            raise SystemExit(int(ExitCode.OK)) from None
+        raise
