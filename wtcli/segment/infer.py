@@ -18,7 +18,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 import torch
-from torchvision.models.detection.image_list import ImageList
+
+# model first: it imports torchvision the quick way (model._import_torchvision)
+from wtcli.segment.model import (backbone_in_bf16, build_model, load_weights, pick_device,
+                                 resolve_precision, resolve_weights, set_infer_size)
+from torchvision.models.detection.image_list import ImageList  # noqa: I001
 from torchvision.ops import boxes as box_ops
 
 from wtcli.errors import InputError
@@ -26,8 +30,6 @@ from wtcli.masks import LABELS, Instances
 from wtcli.segment.bgr import as_bgr
 from wtcli.segment.data import image_tensor
 from wtcli.segment.defaults import CANDIDATE_FLOOR, DEFAULT_MAX_SIZE, DEFAULT_SCORE_THRESHOLD
-from wtcli.segment.model import (backbone_in_bf16, build_model, load_weights, pick_device,
-                                 resolve_precision, resolve_weights, set_infer_size)
 
 MASK_OFFSET_PX = 0.5  # see paste_mask; weights trained with area-resized masks
 MIRROR_BOX_SHIFT_PX = 0.5  # see unmirror_boxes

@@ -15,26 +15,68 @@ shipped file stores them as float16 (cast back to float32 on load).
 
 from __future__ import annotations
 
+import sys
+import types
 from pathlib import Path
 from typing import Any
 
 import torch
 from torch import nn
-from torchvision.models import resnet18
-from torchvision.models._utils import IntermediateLayerGetter
-from torchvision.models.detection import MaskRCNN
-from torchvision.models.detection.anchor_utils import AnchorGenerator
-from torchvision.models.detection.faster_rcnn import FastRCNNPredictor, TwoMLPHead
-from torchvision.models.detection.mask_rcnn import MaskRCNNHeads, MaskRCNNPredictor
-from torchvision.models.detection.rpn import RegionProposalNetwork, RPNHead
-from torchvision.models.detection.transform import GeneralizedRCNNTransform
-from torchvision.models.resnet import BasicBlock
-from torchvision.ops import MultiScaleRoIAlign
-from torchvision.ops.feature_pyramid_network import FeaturePyramidNetwork, LastLevelMaxPool
-from torchvision.ops.poolers import _multiscale_roi_align, _setup_scales
 
-from wtcli.errors import ModelError
-from wtcli.masks import LABELS
+
+def _import_torchvision() -> None:
+    """Import torchvision without importing ``torch._dynamo`` (the compiler), about 1 s of the
+    1.2 s torchvision takes on the 2-core CPU, more than the network's forward pass.
+
+    Only ``torchvision.ops.roi_align`` asks for it at import time, for one function
+    (``is_compile_supported``) it calls only on a path this model never takes. While
+    torchvision is imported, that module is a stand-in whose function imports the real one on
+    its first call; then the stand-in is removed, so ``torch._dynamo`` imports as usual later.
+    If torchvision asks for anything else of it, it is imported the ordinary way."""
+    if "torchvision" in sys.modules or "torch._dynamo" in sys.modules:
+        return
+
+    def is_compile_supported(device_type):
+        from torch._dynamo.utils import is_compile_supported as real
+
+        return real(device_type)
+
+    pkg, utils = types.ModuleType("torch._dynamo"), types.ModuleType("torch._dynamo.utils")
+    utils.is_compile_supported = is_compile_supported
+    pkg.__path__ = []  # a package, so the import system looks no further
+    pkg.utils = utils
+    sys.modules.update({"torch._dynamo": pkg, "torch._dynamo.utils": utils})
+    try:
+        import torchvision.models.detection  # noqa: F401 - the modules this file uses
+        import torchvision.ops  # noqa: F401
+    except (ImportError, AttributeError):  # a torchvision that needs more: the ordinary way
+        for name in [n for n in sys.modules if n == "torchvision" or n.startswith("torchvision.")]:
+            del sys.modules[name]
+    finally:
+        for name, stand_in in (("torch._dynamo.utils", utils), ("torch._dynamo", pkg)):
+            if sys.modules.get(name) is stand_in:
+                del sys.modules[name]
+        if torch.__dict__.get("_dynamo") is pkg:  # set by the import system on the parent
+            del torch._dynamo
+
+
+_import_torchvision()
+
+from torchvision.models import resnet18  # noqa: E402 - after _import_torchvision
+from torchvision.models._utils import IntermediateLayerGetter  # noqa: E402
+from torchvision.models.detection import MaskRCNN  # noqa: E402
+from torchvision.models.detection.anchor_utils import AnchorGenerator  # noqa: E402
+from torchvision.models.detection.faster_rcnn import FastRCNNPredictor, TwoMLPHead  # noqa: E402
+from torchvision.models.detection.mask_rcnn import MaskRCNNHeads, MaskRCNNPredictor  # noqa: E402
+from torchvision.models.detection.rpn import RegionProposalNetwork, RPNHead  # noqa: E402
+from torchvision.models.detection.transform import GeneralizedRCNNTransform  # noqa: E402
+from torchvision.models.resnet import BasicBlock  # noqa: E402
+from torchvision.ops import MultiScaleRoIAlign  # noqa: E402
+from torchvision.ops.feature_pyramid_network import FeaturePyramidNetwork, LastLevelMaxPool  # noqa: E402
+from torchvision.ops.poolers import _multiscale_roi_align, _setup_scales  # noqa: E402
+
+from wtcli.errors import ModelError  # noqa: E402
+from wtcli.masks import LABELS  # noqa: E402
 
 ARCH = "wtseg-r18s-fpn128-p2"
 # Files of the architecture before the fine level: they load with that level's branch at zero,

@@ -1,0 +1,102 @@
+"""What keeps `wtinspect plan` quick (benchmarks/plan_latency.py): nothing loaded or compiled
+that the plan does not use. Each check runs a fresh interpreter, as a user's command does."""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "sample_images" / "turbines.yaml"
+
+
+def _python(code: str, env: dict | None = None, timeout: int = 600) -> dict:
+    """Run ``code`` in a fresh interpreter at the repo root; it prints one JSON line last."""
+    done = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], cwd=ROOT, text=True,
+                          capture_output=True, timeout=timeout, env={**os.environ, **(env or {})})
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_segmenter_imports_torchvision_without_the_compiler():
+    got = _python("""
+        import json, sys
+        import wtcli.segment.infer
+        from wtcli.segment.model import build_model
+        n = sum(p.numel() for p in build_model().parameters())
+        before = sorted(m for m in sys.modules if m.startswith("torch._dynamo"))
+        # the stand-in is gone: the compiler still imports, and roi_align's use of it works
+        import torch._dynamo.utils
+        ra = sys.modules["torchvision.ops.roi_align"]
+        print(json.dumps({"params": n, "dynamo_before": before,
+                          "real": sys.modules["torch._dynamo.utils"].is_compile_supported("cpu"),
+                          "via_torchvision": ra.is_compile_supported("cpu"),
+                          "has_eval_frame": hasattr(torch._dynamo, "optimize")}))
+    """)
+    assert got["dynamo_before"] == []
+    assert got["params"] > 1_000_000
+    assert got["real"] is True and got["via_torchvision"] is True and got["has_eval_frame"]
+
+
+def test_plan_from_pitch_json_loads_no_torch_and_compiles_no_kernel(tmp_path):
+    """After set-up (``python -m wtcli.warmup``, here into an empty numba cache), a plan from a
+    pitch JSON takes every compiled kernel from the cache and never imports torch."""
+    import numpy as np
+
+    from wtcli.geometry import Camera
+    from wtcli.geometry.projection import instance_masks
+    from wtcli.jsonio import document, write_json
+    from wtcli.masks import Instances
+    from wtcli.pitch import PITCH_SCHEMA, PITCH_VERSION, pitch_from_instances
+    from wtcli.plan.zone import default_photo_camera
+    from wtcli.plan.config import load_mission
+
+    t = load_mission(SAMPLE).turbine("T2")
+    inst = instance_masks(t, default_photo_camera(t, Camera(800, 600, 16, 23.2)))
+    res = pitch_from_instances(Instances(np.array([lb for lb, _, _ in inst], dtype=object),
+                                         np.array([m for _, _, m in inst])), expected_blades=3)
+    pj = tmp_path / "pitch.json"
+    write_json(pj, document(PITCH_SCHEMA, PITCH_VERSION, {"images": [{**res.to_dict(), "error": None}]}))
+
+    env = {"NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
+    warm = subprocess.run([sys.executable, "-m", "wtcli.warmup"], cwd=ROOT, env={**os.environ, **env},
+                          capture_output=True, text=True, timeout=900)
+    assert warm.returncode == 0, warm.stderr[-2000:]
+    got = _python(f"""
+        import json, sys
+        from numba.core.registry import CPUDispatcher
+        from wtcli.cli import main
+        try:
+            main(["plan", {str(SAMPLE)!r}, "T2={pj}", "--out", {str(tmp_path / "plan.json")!r}])
+        except SystemExit as e:
+            code = e.code
+        hits, misses = [], []
+        for name, mod in list(sys.modules.items()):
+            if name.startswith("wtcli"):
+                for k, v in vars(mod).items():
+                    if isinstance(v, CPUDispatcher):
+                        hits += [f"{{name}}.{{k}}"] * sum(v.stats.cache_hits.values())
+                        misses += [f"{{name}}.{{k}}"] * sum(v.stats.cache_misses.values())
+        print(json.dumps({{"code": code, "torch": sorted(m for m in sys.modules if m == "torch"
+                                                           or m.startswith(("torch.", "torchvision"))),
+                           "hits": hits, "misses": misses}}))
+    """, env)
+    assert got["code"] == 0
+    assert got["torch"] == []
+    assert got["hits"], "the plan used no compiled kernel: this check checks nothing"
+    assert got["misses"] == [], f"compiled at run time, not by wtcli.warmup: {got['misses']}"
+
+
+def test_cli_lets_openmp_threads_sleep_unless_told_otherwise():
+    code = """
+        import json, os
+        import wtcli.cli
+        print(json.dumps(os.environ.get("OMP_WAIT_POLICY")))
+    """
+    env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+    done = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], cwd=ROOT, text=True,
+                          capture_output=True, timeout=120, env=env)
+    assert json.loads(done.stdout.splitlines()[-1]) == "PASSIVE"
+    assert _python(code, {"OMP_WAIT_POLICY": "ACTIVE"}) == "ACTIVE"
