@@ -34,7 +34,7 @@ def covered_from(sample: SurfaceSamples, eye: np.ndarray, gsd_mm: float = 8.0) -
 
 def incidence_deg(sample: SurfaceSamples, eye: np.ndarray) -> float:
     to_eye = eye - sample.points[0]
-    return float(np.degrees(np.arccos(sample.normals[0] @ to_eye / np.linalg.norm(to_eye))))
+    return float(np.degrees(np.arccos(np.clip(sample.normals[0] @ to_eye / np.linalg.norm(to_eye), -1, 1))))
 
 
 def test_blade_behind_the_tower_is_not_covered_from_the_tower_side():

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wtcli.geometry.camera import Camera
-from wtcli.geometry.turbine import BLADE_SIDES, SurfaceSamples
+from wtcli.geometry.turbine import BLADE_SIDES, SurfaceSamples, Turbine
 
 
 @dataclass(frozen=True)
@@ -87,6 +87,19 @@ def measure_coverage(samples: SurfaceSamples, camera: Camera, positions: np.ndar
     positions (P, 3) world; rotations (P, 3, 3) world->camera (as Camera.R). ``border_px`` is a
     fraction of the image size ignored at each edge (lens falloff, framing error). Occlusion is
     by ``samples.turbine`` (the turbine ``Turbine.surface_samples`` took them from)."""
+    return _measure(samples, camera, positions, rotations, target_gsd_mm, max_incidence_deg,
+                    gsd_tolerance, border_px)[0]
+
+
+def _measure(samples: SurfaceSamples, camera: Camera, positions: np.ndarray,
+             rotations: np.ndarray, target_gsd_mm: float, max_incidence_deg: float,
+             gsd_tolerance: float, border_px: float, half_size: np.ndarray | None = None
+             ) -> tuple[Coverage, np.ndarray]:
+    """``measure_coverage``, and with ``half_size`` (M,) (a sample's distance to its cell's
+    corners, m) which samples are marginal: some photo that has them in frame and within the
+    GSD distance sees them so near the incidence limit that the limit may cross their cell (the
+    normal turns by ``samples.turn_deg`` across it, the direction to the camera by up to
+    half_size / distance). Occlusion is not asked for these."""
     positions = np.asarray(positions, float).reshape(-1, 3)
     rotations = np.asarray(rotations, float).reshape(-1, 3, 3)
     if len(positions) != len(rotations):
@@ -96,12 +109,31 @@ def measure_coverage(samples: SurfaceSamples, camera: Camera, positions: np.ndar
                          "samples without one: occlusion cannot be checked")
     P, N = samples.points, samples.normals
     max_dist = camera.distance_for_gsd(target_gsd_mm * gsd_tolerance)
+    marginal = np.zeros(len(P), bool)
+    if half_size is None:
+        s, p, g = _near_pairs(P, N, positions, rotations, camera, max_dist, max_incidence_deg, border_px)
+    else:
+        # The pairs within the incidence limit plus the widest margin any sample may need (no
+        # photo is taken within a metre of the surface).
+        wide = min(max_incidence_deg + float(np.max(samples.turn_deg, initial=0.0)) / 2
+                   + float(np.degrees(np.max(half_size, initial=0.0) / 1.0)), 89.9)
+        s, p, g = _near_pairs(P, N, positions, rotations, camera, max_dist, wide, border_px)
+        rel = P[s] - positions[p]
+        dist = np.linalg.norm(rel, axis=1)
+        inc = np.degrees(np.arccos(np.clip(-np.einsum("ij,ij->i", rel, N[s]) / np.maximum(dist, 1e-9),
+                                           -1.0, 1.0)))
+        margin = samples.turn_deg[s] / 2 + np.degrees(half_size[s] / np.maximum(dist, 1e-9))
+        near = np.zeros(len(P), bool)  # a photo the limit may cross the cell for
+        near[s[np.abs(inc - max_incidence_deg) <= margin]] = True
+        firm = np.zeros(len(P), bool)  # a photo that has the whole cell within the limit
+        firm[s[inc <= max_incidence_deg - margin]] = True
+        inside = inc <= max_incidence_deg
+        s, p, g = s[inside], p[inside], g[inside]
     # Every (sample, photo) pair that passes the cheap tests; the line of sight comes after.
-    s, p, g = _near_pairs(P, N, positions, rotations, camera, max_dist, max_incidence_deg, border_px)
     covered = np.zeros(len(P), bool)
     best = np.full(len(P), np.inf)
     if not len(s):
-        return Coverage(samples, covered, best)
+        return Coverage(samples, covered, best), marginal
     # Tracing a line of sight costs far more than the tests above, and one clear photo settles a
     # sample: trace each sample's photos finest GSD first, in rounds of 1, 2, 4, ... per sample,
     # and stop at the round where one is clear (its finest clear GSD is then in that round).
@@ -118,7 +150,135 @@ def measure_coverage(samples: SurfaceSamples, camera: Camera, positions: np.ndar
         np.minimum.at(best, s[clear], g[clear])
         covered[s[clear]] = True
         lo, width = lo + width, 2 * width
-    return Coverage(samples, covered, best)
+    if half_size is not None:
+        # Covered with no photo that holds the whole cell within the limit, or missed with a
+        # photo the limit may cross it for (line of sight not asked of these photos).
+        marginal = near & ~(covered & firm)
+    return Coverage(samples, covered, best), marginal
+
+
+REFINE_LEVELS = 3  # blade cells at a coverage boundary are cut in 2 x 2 this many times
+
+
+def turbine_coverage(turbine: Turbine, camera: Camera, positions: np.ndarray,
+                     rotations: np.ndarray, target_gsd_mm: float, spacing: float,
+                     max_incidence_deg: float = 60.0, parts: str = "all",
+                     levels: int = REFINE_LEVELS, gsd_tolerance: float = 1.05,
+                     border_px: float = 0.02) -> Coverage:
+    """Coverage of ``turbine``'s surface (``parts`` as ``Turbine.surface_samples``), its blades
+    sampled finer where the covered and the missed parts meet, so the figure converges.
+
+    A sample stands for its cell of the blade's grid (``Turbine.blade_grid``: ``spacing`` along
+    the span, equal arc lengths round each side). A side's covered fraction is a midpoint sum
+    over those cells, and where a coverage boundary crosses a cell its error is up to the whole
+    cell; the boundaries are lines (a frame edge, the incidence limit running along a thin
+    edge), so a fixed grid converges only as fast as its spacing shrinks. Here every cell whose
+    state differs from a neighbour's (along the span or round the section, at the finest level
+    reached) is cut in 2 x 2 and its four middles measured, ``levels`` times over: the boundary
+    is then placed within 1/2**levels of a cell, for little more work than the boundary's
+    length. Tower, nacelle and hub samples are measured as sampled."""
+    L = int(levels)
+    shapes = [turbine.blade_grid(k, spacing) for k in range(turbine.n_blades)]
+
+    def half_size(smp: SurfaceSamples) -> np.ndarray:
+        """Each blade sample's distance to its cell's corners (0 off blades)."""
+        out = np.zeros(len(smp))
+        on = smp.blade >= 0
+        r, _, s0, s1 = np.array(shapes, float)[smp.blade[on]].T
+        h = (s1 - s0) / (r * 2.0 ** smp.level[on])
+        out[on] = 0.5 * np.hypot(h, smp.area[on] / h)
+        return out
+
+    def measure(smp: SurfaceSamples) -> tuple[Coverage, np.ndarray]:
+        return _measure(smp, camera, positions, rotations, target_gsd_mm, max_incidence_deg,
+                        gsd_tolerance, border_px, half_size(smp) if L > 0 else None)
+
+    base = turbine.surface_samples(spacing, parts)
+    cov, marginal = measure(base)
+    if L <= 0 or parts == "structure" or not len(positions):
+        return cov
+    # Per blade, the finest grid: the state of the leaf cell over each fine cell (-1 none:
+    # buried, or nothing sampled) and that leaf's level.
+    state = [np.full((r << L, (4 * n) << L), -1, np.int8) for r, n, _, _ in shapes]
+    owner = [np.full(st.shape, L, np.int8) for st in state]
+    chunks = [(cov.samples, cov.covered, cov.best_gsd_mm)]
+    split: list[np.ndarray] = []  # keys of the cells cut (no longer leaves)
+
+    def key(k: np.ndarray, level: np.ndarray, row: np.ndarray, col: np.ndarray) -> np.ndarray:
+        return ((k.astype(np.int64) * (L + 1) + level) << 40) + (row.astype(np.int64) << 20) + col
+
+    def paint(smp: SurfaceSamples, covered: np.ndarray) -> None:
+        for k in np.unique(smp.blade[smp.blade >= 0]):
+            for lv in np.unique(smp.level[smp.blade == k]):
+                m = (smp.blade == k) & (smp.level == lv)
+                b = 1 << (L - int(lv))
+                st, ow = state[k], owner[k]
+                st.reshape(st.shape[0] // b, b, st.shape[1] // b, b)[smp.row[m], :, smp.col[m], :] = \
+                    covered[m][:, None, None]
+                ow.reshape(ow.shape[0] // b, b, ow.shape[1] // b, b)[smp.row[m], :, smp.col[m], :] = lv
+
+    paint(cov.samples, cov.covered)
+    flagged = [(cov.samples, marginal)]
+    while True:
+        todo = []  # (blade, level, row, col) of the leaves to cut
+        # Leaves the incidence limit may cross (their own middle says nothing of it)
+        for smp, m in flagged:
+            m = m & (smp.blade >= 0) & (smp.level < L)
+            for k in np.unique(smp.blade[m]):
+                mk = m & (smp.blade == k)
+                todo.append((int(k), np.stack([smp.level[mk], smp.row[mk], smp.col[mk]],
+                                              axis=1).astype(np.int64)))
+        for k, (st, ow) in enumerate(zip(state, owner)):
+            ok = st >= 0
+            edge = np.zeros(st.shape, bool)
+            d = ok & np.roll(ok, -1, axis=1) & (st != np.roll(st, -1, axis=1))  # round the section
+            edge |= d | np.roll(d, 1, axis=1)
+            d = ok[:-1] & ok[1:] & (st[:-1] != st[1:])  # along the span
+            edge[:-1] |= d
+            edge[1:] |= d
+            edge &= ow < L
+            if not edge.any():
+                continue
+            i, j = np.nonzero(edge)
+            lv = ow[i, j].astype(np.int64)
+            i, j = i >> (L - lv), j >> (L - lv)
+            todo.append((k, np.stack([lv, i, j], axis=1)))
+        if not todo:
+            break
+        by_blade: dict[int, list[np.ndarray]] = {}
+        for k, u in todo:
+            by_blade.setdefault(k, []).append(u)
+        new = []
+        for k, us in by_blade.items():
+            u = np.unique(np.concatenate(us), axis=0)
+            lv, i, j = u[:, 0], u[:, 1], u[:, 2]
+            split.append(key(np.full(len(u), k), lv, i, j))
+            for l0 in np.unique(lv):  # the parents' fine cells: nothing until the children say
+                m = lv == l0
+                bb = 1 << (L - int(l0))
+                st = state[k]
+                st.reshape(st.shape[0] // bb, bb, st.shape[1] // bb, bb)[i[m], :, j[m], :] = -1
+                ow = owner[k]
+                ow.reshape(ow.shape[0] // bb, bb, ow.shape[1] // bb, bb)[i[m], :, j[m], :] = l0 + 1
+            for l0 in np.unique(lv):
+                m = lv == l0
+                ci = (2 * i[m])[:, None] + np.array([0, 0, 1, 1])
+                cj = (2 * j[m])[:, None] + np.array([0, 1, 0, 1])
+                new.append(turbine.blade_cell_samples(k, spacing, int(l0) + 1, ci.ravel(), cj.ravel()))
+        smp = SurfaceSamples.concatenate(new)
+        c, marginal = measure(smp)
+        paint(smp, c.covered)
+        chunks.append((smp, c.covered, c.best_gsd_mm))
+        flagged = [(smp, marginal)]
+    if not split:
+        return cov
+    cut = np.concatenate(split)
+    keep = []
+    for smp, covered, best in chunks:
+        leaf = ~np.isin(key(smp.blade, smp.level, smp.row, smp.col), cut) | (smp.blade < 0)
+        keep.append((smp[leaf], covered[leaf], best[leaf]))
+    return Coverage(SurfaceSamples.concatenate([c[0] for c in keep]),
+                    np.concatenate([c[1] for c in keep]), np.concatenate([c[2] for c in keep]))
 
 
 CULL_SPLIT = 2  # cubes max_dist / 2 wide: finer ones cull closer but cost more (measured 2-4)

@@ -27,12 +27,22 @@ Z = np.array([0.0, 0.0, 1.0])
 
 BLADE_SIDES = ("leading_edge", "pressure_side", "trailing_edge", "suction_side")
 
-# Planform as fractions of the blade's span stations: chord rises from the root cylinder to its
-# maximum at 20 % span, then tapers to the tip (typical of 40-80 m utility blades).
-_MAX_CHORD_AT = 0.2
-_ROOT_THICKNESS_RATIO = 1.0  # circular root
-_MAX_CHORD_THICKNESS_RATIO = 0.40
-_TIP_THICKNESS_RATIO = 0.18
+# Default blade and nacelle proportions (docs/turbines-yaml.md, "Turbine geometry the clearance
+# rests on", has their sources): chosen on the large side of published 2-10 MW designs (NREL
+# 5 MW, DTU 10 MW, IEA 3.4 MW reference turbines) so that a turbine without a datasheet is
+# modelled no thinner than it is. Chord rises from the circular root to its maximum at
+# ``MAX_CHORD_AT`` of the span, then tapers straight to the tip.
+MAX_CHORD_AT = 0.2  # NREL 5 MW 0.23, DTU 10 MW 0.22: the chord there is still ~99 % of its max
+ROOT_THICKNESS_RATIO = 1.0  # thickness / chord: a circular root
+MAX_CHORD_THICKNESS_RATIO = 0.45  # NREL 5 MW 0.35-0.40 (DU 40/35) there; thicker modern roots
+TIP_THICKNESS_RATIO = 0.21  # NACA 64-618 (0.18) on NREL 5 MW, DU 93-W-210 / FFA-W3-211 elsewhere
+ROOT_CHORD_R = 0.06  # root chord / rotor radius: NREL 5 MW 0.056, DTU 10 MW 0.060
+MAX_CHORD_R = 0.075  # NREL 5 MW 0.074, DTU 10 MW 0.070, IEA 3.4 MW 0.069
+# The chord the straight taper from the maximum reaches at the tip: NREL 5 MW's chord runs
+# straight to 1.9 m (0.030 R) there before its rounded tip; a smaller value would put the
+# straight model inside the real blade at mid-span.
+TIP_CHORD_R = 0.03
+NACELLE_AHEAD_OF_LENGTH = 0.1  # nacelle box centre ahead of the tower axis, x its length
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -63,6 +73,12 @@ class Turbine:
     blade_root_chord: float | None = None
     blade_max_chord: float | None = None
     blade_tip_chord: float | None = None
+    blade_max_chord_at: float = MAX_CHORD_AT  # span fraction (0 root, 1 tip) of the max chord
+    blade_root_thickness_ratio: float = ROOT_THICKNESS_RATIO  # thickness / chord at the root
+    blade_max_chord_thickness_ratio: float = MAX_CHORD_THICKNESS_RATIO  # ... at the max chord
+    blade_tip_thickness_ratio: float = TIP_THICKNESS_RATIO  # ... at the tip
+    nacelle_ahead: float | None = None  # nacelle box centre ahead of the tower axis (rotor axis), m
+    nacelle_above_hub: float = 0.0  # nacelle box centre above the hub centre, m
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -73,9 +89,9 @@ class Turbine:
             "nacelle_width": 0.09 * R,
             "nacelle_height": 0.09 * R,
             "hub_radius": 0.05 * R,
-            "blade_root_chord": 0.055 * R,
-            "blade_max_chord": 0.075 * R,
-            "blade_tip_chord": 0.015 * R,
+            "blade_root_chord": ROOT_CHORD_R * R,
+            "blade_max_chord": MAX_CHORD_R * R,
+            "blade_tip_chord": TIP_CHORD_R * R,
         }
         for k, v in defaults.items():
             if getattr(self, k) is None:
@@ -84,6 +100,8 @@ class Turbine:
             object.__setattr__(self, "tower_top_radius", 0.6 * self.tower_base_radius)
         if self.overhang is None:
             object.__setattr__(self, "overhang", 0.5 * self.nacelle_length + 0.8 * self.hub_radius)
+        if self.nacelle_ahead is None:
+            object.__setattr__(self, "nacelle_ahead", NACELLE_AHEAD_OF_LENGTH * self.nacelle_length)
         object.__setattr__(self, "base", tuple(float(x) for x in self.base))
         object.__setattr__(self, "azimuths_deg", tuple(float(a) % 360.0 for a in self.azimuths_deg))
         self._check()
@@ -102,8 +120,17 @@ class Turbine:
                      "blade_tip_chord"):
             need(getattr(self, name) > 0, f"expected {name} > 0, got {getattr(self, name)}")
         need(self.overhang >= 0, f"expected overhang >= 0, got {self.overhang}")
-        need(self.hub_height > self.nacelle_height,
-             f"expected hub_height > nacelle_height, got {self.hub_height}")
+        need(0.0 < self.blade_max_chord_at < 1.0,
+             f"expected blade_max_chord_at in (0, 1), got {self.blade_max_chord_at}")
+        for name in ("blade_root_thickness_ratio", "blade_max_chord_thickness_ratio",
+                     "blade_tip_thickness_ratio"):
+            need(0.0 < getattr(self, name) <= 1.0,
+                 f"expected {name} in (0, 1], got {getattr(self, name)}")
+        for name in ("nacelle_ahead", "nacelle_above_hub"):
+            need(math.isfinite(getattr(self, name)), f"expected {name} finite, got {getattr(self, name)}")
+        need(self.tower_height > 0,
+             f"expected the nacelle's bottom (hub_height + nacelle_above_hub - nacelle_height / 2 "
+             f"= {self.tower_height:g} m) above the tower base")
         # A blade pointing straight down must stay clear of the ground.
         need(self.hub_height > self.tip_radius + 1.0,
              f"expected hub_height ({self.hub_height}) > blade tip radius ({self.tip_radius}) + 1 m")
@@ -166,13 +193,16 @@ class Turbine:
 
     @property
     def tower_height(self) -> float:
-        return self.hub_height - 0.5 * self.nacelle_height
+        """The tower's top: the nacelle box's bottom."""
+        return self.hub_height + self.nacelle_above_hub - 0.5 * self.nacelle_height
 
     @property
     def nacelle_center(self) -> np.ndarray:
-        # The box sits on the tower top, a little ahead of the tower axis, hub centre at its height.
-        return self._cached("nacelle_center", lambda: self.base_xyz + Z * self.hub_height
-                            + self.axis * (0.1 * self.nacelle_length))
+        # The box sits on the tower top, ``nacelle_ahead`` ahead of the tower axis along the
+        # rotor axis, its centre ``nacelle_above_hub`` above the hub centre's height.
+        return self._cached("nacelle_center", lambda: self.base_xyz
+                            + Z * (self.hub_height + self.nacelle_above_hub)
+                            + self.axis * self.nacelle_ahead)
 
     def blade_direction(self, k: int) -> np.ndarray:
         return self.blade_frame(k)[0]
@@ -209,14 +239,15 @@ class Turbine:
         """Semi-axes (chord/2, thickness/2) at span fraction f in [0, 1] (root -> tip)."""
         f = np.clip(np.asarray(f, dtype=float), 0.0, 1.0)
         chord = self._blade_chord(f)
-        ratio = np.interp(f, [0.0, _MAX_CHORD_AT, 1.0], [_ROOT_THICKNESS_RATIO,
-                                                        _MAX_CHORD_THICKNESS_RATIO, _TIP_THICKNESS_RATIO])
+        ratio = np.interp(f, [0.0, self.blade_max_chord_at, 1.0],
+                          [self.blade_root_thickness_ratio, self.blade_max_chord_thickness_ratio,
+                           self.blade_tip_thickness_ratio])
         return chord / 2.0, ratio * chord / 2.0
 
     def _blade_chord(self, f: np.ndarray) -> np.ndarray:
         """Chord at span fraction f in [0, 1] (the planform; the clearance bound needs only it)."""
         return np.interp(f, *self._cached("chord_knots", lambda: (
-            np.array([0.0, _MAX_CHORD_AT, 1.0]),
+            np.array([0.0, self.blade_max_chord_at, 1.0]),
             np.array([self.blade_root_chord, self.blade_max_chord, self.blade_tip_chord]))))
 
     def _blade_taper_cos(self) -> float:
@@ -276,9 +307,10 @@ class Turbine:
         vec = np.array([self.hub_center, self.nacelle_center, a, side, half, self.base_xyz])
         sc = np.array([self.hub_radius, self.tower_height, self.tower_base_radius,
                        self.tower_top_radius, self.blade_root_offset, self.tip_radius,
-                       self._blade_taper_cos(), _MAX_CHORD_AT, self.blade_root_chord,
-                       self.blade_max_chord, self.blade_tip_chord, _ROOT_THICKNESS_RATIO,
-                       _MAX_CHORD_THICKNESS_RATIO, _TIP_THICKNESS_RATIO], dtype=float)
+                       self._blade_taper_cos(), self.blade_max_chord_at, self.blade_root_chord,
+                       self.blade_max_chord, self.blade_tip_chord, self.blade_root_thickness_ratio,
+                       self.blade_max_chord_thickness_ratio, self.blade_tip_thickness_ratio],
+                      dtype=float)
         frames = np.array([self.blade_frame(k) for k in range(self.n_blades)],
                           dtype=float).reshape(-1, 3, 3)
         return vec, sc, frames
@@ -423,45 +455,76 @@ class Turbine:
         cat = {key: np.concatenate([ch[key] for ch in chunks]) for key in chunks[0]}
         return SurfaceSamples(**cat, turbine=self)
 
-    def _blade_samples(self, k: int, spacing: float) -> dict[str, np.ndarray]:
+    def blade_grid(self, k: int, spacing: float) -> tuple[int, int, float, float]:
+        """(rows, per_side, s_start, s_end): how blade k's surface is cut into sample cells at
+        ``spacing``. ``rows`` span cells of equal length between ``s_start`` and ``s_end`` (m from
+        the hub centre: from where the blade leaves the hub sphere to the tip) and ``per_side``
+        cells of equal arc length round each of the four sides of every section (the longest
+        side's arc at ``spacing``, odd, at least ``_SIDE_SAMPLES_MIN``); columns run round the
+        section side after side (``BLADE_SIDES`` order). At refinement level l each cell is cut
+        in 2 x 2: rows << l by (4 * per_side) << l."""
+        key = ("blade_grid", k, float(spacing))
+        if key not in self._cache:
+            s0, s1 = self.blade_root_offset, self.tip_radius
+            s_start = max(s0, math.sqrt(max(self.hub_radius ** 2 - (self.blade_root_chord / 2) ** 2, 0)))
+            rows = max(2, int(math.ceil((s1 - s_start) / spacing)))
+            f = (s_start + (np.arange(rows) + 0.5) * (s1 - s_start) / rows - s0) / (s1 - s0)
+            A, B = self.blade_semi_axes(f)
+            longest = float((A[:, None] * _side_tables(B / A)[2]).max())
+            n = max(_SIDE_SAMPLES_MIN, int(math.ceil(longest / spacing)))
+            self._cache[key] = (rows, n + 1 - n % 2, s_start, s1)
+        return self._cache[key]
+
+    def blade_cell_samples(self, k: int, spacing: float, level: int, row: np.ndarray,
+                           col: np.ndarray) -> SurfaceSamples:
+        """Samples at the middles of blade k's cells (``blade_grid``) at refinement ``level``,
+        (row, col) each, with the cell's area; cells buried in another part are left out."""
+        rows, per_side, s_start, s_end = self.blade_grid(k, spacing)
+        row, col = np.asarray(row, np.int64), np.asarray(col, np.int64)
+        nr, nc = rows << level, per_side << level
         d, c, n = self.blade_frame(k)
         s0, s1 = self.blade_root_offset, self.tip_radius
-        # Start where the blade leaves the hub sphere.
-        s_start = max(s0, math.sqrt(max(self.hub_radius ** 2 - (self.blade_root_chord / 2) ** 2, 0)))
-        ns = max(2, int(math.ceil((s1 - s_start) / spacing)))
-        s = s_start + (np.arange(ns) + 0.5) * (s1 - s_start) / ns
+        h = (s_end - s_start) / nr
+        s = s_start + (row + 0.5) * h
         f = (s - s0) / (s1 - s0)
         A, B = self.blade_semi_axes(f)
-        # Round each section by arc length, side by side: each side (normal within 45 deg of
-        # +c, +n, -c, -n) gets samples as long as its own arc, at most ``spacing`` apart and
-        # an odd number, so that one lies on the side's middle line (the leading and trailing
-        # edge lines themselves). A side's figure then converges as ``spacing`` shrinks; an
-        # even spread in the ellipse's angle put only one or two samples on a thin edge.
-        psi, dl, sides = _section_samples(A, B, spacing)
-        m = psi.shape[1]
-        S = np.repeat(np.arange(ns)[:, None], m, axis=1)
-        PSI = psi
-        a_, b_ = A[S], B[S]
-        cu, sv = np.cos(PSI), np.sin(PSI)
-        pts = (self.hub_center + s[S][..., None] * d + (a_ * cu)[..., None] * c
-               + (b_ * sv)[..., None] * n)
-        nu, nv = cu / a_, sv / b_
-        nrm = _unit(nu[..., None] * c + nv[..., None] * n)
-        side = np.broadcast_to(sides, (ns, m))
-        area = dl * (s1 - s_start) / ns
-        size = ns * m
-        out = {
-            "points": pts.reshape(size, 3), "normals": nrm.reshape(size, 3),
-            "area": area.reshape(size), "part": np.full(size, k, np.int16),
-            "blade": np.full(size, k, np.int16), "side": side.reshape(size).astype(np.int8),
-            "span": np.repeat(f, m),
-        }
+        side = col // nc
+        # Round a section by arc length, side by side (each side: normal within 45 deg of +c,
+        # +n, -c, -n), so the thin edges get as many samples as the flat sides and one lies on
+        # each side's middle line (the leading and trailing edge lines themselves).
+        uniq, inv = np.unique(row, return_inverse=True)
+        fu = (s_start + (uniq + 0.5) * h - s0) / (s1 - s0)
+        Au, Bu = self.blade_semi_axes(fu)
+        grid, cumn, total = _side_tables(Bu / Au)
+        table = inv * 4 + side
+        keys = cumn.reshape(-1, cumn.shape[-1]) + 2.0 * np.arange(len(uniq) * 4)[:, None]
+        psi = np.interp((col % nc + 0.5) / nc + 2.0 * table, keys.ravel(),
+                        grid.reshape(-1, grid.shape[-1]).ravel())
+        cu, sv = np.cos(psi), np.sin(psi)
+        pts = (self.hub_center + s[:, None] * d + (A * cu)[:, None] * c + (B * sv)[:, None] * n)
+        nrm = _unit((cu / A)[:, None] * c + (sv / B)[:, None] * n)
+        area = h * A * total.reshape(-1)[table] / nc
+        # How far the normal turns across the cell round the section: its arc over the radius of
+        # curvature there, (A^2 sin^2 + B^2 cos^2)^1.5 / (A B).
+        rho = (A * A * sv * sv + B * B * cu * cu) ** 1.5 / (A * B)
+        turn = np.degrees(area / h / rho)
+        m = len(row)
+        out = {"points": pts.reshape(m, 3), "normals": nrm.reshape(m, 3), "area": area,
+               "part": np.full(m, k, np.int16), "blade": np.full(m, k, np.int16),
+               "side": side.astype(np.int8), "span": f, "row": row.astype(np.int32),
+               "col": col.astype(np.int32), "level": np.full(m, level, np.int8), "turn_deg": turn}
         # Where the root runs into another part (its trailing edge into the nacelle's front face,
         # which sits less than a root semi-chord behind the rotor plane), that stretch is inside
         # the turbine, not on its outer surface: no camera can see it, so it is not sampled.
         others = [j for j in range(len(self.part_names())) if j != k]
         buried = self.clearance_by_part(out["points"], cap=1e-6)[:, others].min(axis=1) <= 0.0
-        return {key: v[~buried] for key, v in out.items()}
+        return SurfaceSamples(**{key: v[~buried] for key, v in out.items()}, turbine=self)
+
+    def _blade_samples(self, k: int, spacing: float) -> dict[str, np.ndarray]:
+        rows, per_side, _, _ = self.blade_grid(k, spacing)
+        R, C = np.meshgrid(np.arange(rows), np.arange(4 * per_side), indexing="ij")
+        smp = self.blade_cell_samples(k, spacing, 0, R.ravel(), C.ravel())
+        return {key: getattr(smp, key) for key in SurfaceSamples.__dataclass_fields__ if key != "turbine"}
 
     def _tower_samples(self, spacing: float) -> dict[str, np.ndarray]:
         H, rb, rt = self.tower_height, self.tower_base_radius, self.tower_top_radius
@@ -517,7 +580,9 @@ class Turbine:
         n = len(pts)
         return {"points": pts, "normals": nrm, "area": area, "part": np.full(n, part, np.int16),
                 "blade": np.full(n, -1, np.int16), "side": np.full(n, -1, np.int8),
-                "span": np.full(n, -1.0)}
+                "span": np.full(n, -1.0), "row": np.full(n, -1, np.int32),
+                "col": np.full(n, -1, np.int32), "level": np.full(n, -1, np.int8),
+                "turn_deg": np.zeros(n)}
 
     # ---- mesh for rendering -----------------------------------------------------------------
     def mesh(self, around: int = 20, spans: int = 40) -> Mesh:
@@ -593,6 +658,12 @@ class SurfaceSamples:
     blade: np.ndarray  # (M,) blade index, -1 for tower/nacelle/hub
     side: np.ndarray  # (M,) index into BLADE_SIDES, -1 off blades
     span: np.ndarray  # (M,) span fraction 0 root .. 1 tip, -1 off blades
+    # A blade sample's cell in Turbine.blade_grid: row, column and refinement level (-1 off
+    # blades; None: all -1), and how far the normal turns across it round the section (deg).
+    row: np.ndarray | None = None
+    col: np.ndarray | None = None
+    level: np.ndarray | None = None
+    turn_deg: np.ndarray | None = None
     # The turbine the samples lie on: its parts are what can hide a sample from a camera.
     turbine: Turbine | None = field(default=None, repr=False, compare=False)
 
@@ -601,7 +672,11 @@ class SurfaceSamples:
         if self.points.shape != (m, 3) or self.normals.shape != (m, 3):
             raise ValueError(f"expected points and normals (M, 3), got {self.points.shape}, "
                              f"{self.normals.shape}")
-        for name in ("area", "part", "blade", "side", "span"):
+        for name, fill, dtype in (("row", -1, np.int32), ("col", -1, np.int32),
+                                  ("level", -1, np.int8), ("turn_deg", 0.0, float)):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, np.full(m, fill, dtype))
+        for name in ("area", "part", "blade", "side", "span", "row", "col", "level", "turn_deg"):
             if getattr(self, name).shape != (m,):
                 raise ValueError(f"expected {name} of shape ({m},), got {getattr(self, name).shape}")
 
@@ -611,6 +686,13 @@ class SurfaceSamples:
     def __getitem__(self, idx: Any) -> SurfaceSamples:
         return SurfaceSamples(**{k: getattr(self, k)[idx] for k in self.__dataclass_fields__
                                  if k != "turbine"}, turbine=self.turbine)
+
+    @staticmethod
+    def concatenate(parts: list[SurfaceSamples]) -> SurfaceSamples:
+        """One set from several of the same turbine (in order)."""
+        return SurfaceSamples(**{k: np.concatenate([getattr(p, k) for p in parts])
+                                 for k in SurfaceSamples.__dataclass_fields__ if k != "turbine"},
+                              turbine=parts[0].turbine if parts else None)
 
 
 @dataclass(frozen=True)
@@ -681,42 +763,29 @@ def _ellipse_distance(u: np.ndarray, v: np.ndarray, A: np.ndarray, B: np.ndarray
     return out
 
 
-_SIDE_SAMPLES_MIN = 5  # per side of a section, odd: the side's middle line and two each side
+_SIDE_SAMPLES_MIN = 9  # cells round each side of a section at least, odd (its middle line sampled)
+_SIDE_TABLE = 256  # steps of the arc-length table of each side
 
 
-def _section_samples(A: np.ndarray, B: np.ndarray, spacing: float
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(psi, dl, side): ``psi`` and ``dl`` (sections, m), the ellipse angles of each section's
-    samples (point A cos psi along the chord, B sin psi along the thickness) and the arc length
-    each stands for; ``side`` (m,) each sample's index in ``BLADE_SIDES``: the side whose
-    normal is within 45 deg of +chord (leading edge), +thickness, -chord, -thickness. Each
-    side is cut into cells of equal arc length, as many in every section (the longest such arc
-    at ``spacing``, odd, at least ``_SIDE_SAMPLES_MIN``), a sample at each cell's middle."""
-    A, B = np.asarray(A, float), np.asarray(B, float)
-    p1 = np.arctan2(B, A)  # where the normal is at 45 deg: tan(psi) = (B / A) tan(45 deg)
+def _side_tables(ratio: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Arc length round the four sides of ellipses of semi-axes 1 (chord) and ``ratio``
+    (thickness / chord), (R,): ``grid`` (R, 4, T + 1) ellipse angles psi (point cos psi along
+    the chord, ratio sin psi along the thickness) from each side's start to its end, ``cumn``
+    the arc length up to each as a fraction of the side's, ``total`` (R, 4) each side's arc.
+    A side is where the normal is within 45 deg of +chord (leading edge), +thickness, -chord,
+    -thickness (``BLADE_SIDES``); a section's are these times its chord semi-axis."""
+    r = np.asarray(ratio, float).reshape(-1)
+    p1 = np.arctan(r)  # the normal is at 45 deg where tan(psi) = ratio * tan(45 deg)
     bounds = np.stack([-p1, p1, math.pi - p1, math.pi + p1, 2 * math.pi - p1], axis=1)
-    fine = 256
-    u = np.linspace(0.0, 1.0, fine + 1)
-    per_side = []
-    for j in range(4):
-        lo, hi = bounds[:, j], bounds[:, j + 1]
-        grid = lo[:, None] + (hi - lo)[:, None] * u[None, :]  # (sections, fine + 1)
-        speed = np.hypot(A[:, None] * np.sin(grid), B[:, None] * np.cos(grid))
-        cum = np.concatenate([np.zeros((len(A), 1)),
-                              np.cumsum(0.5 * (speed[:, 1:] + speed[:, :-1]) * np.diff(grid, axis=1),
-                                        axis=1)], axis=1)
-        per_side.append((grid, cum))
-    psi, dl, side = [], [], []
-    for j, (grid, cum) in enumerate(per_side):
-        n = max(_SIDE_SAMPLES_MIN, int(math.ceil(float(cum[:, -1].max()) / spacing)))
-        n += 1 - n % 2  # odd: one sample on the middle line
-        total = cum[:, -1:]
-        target = (np.arange(n) + 0.5)[None, :] / n * total  # cell middles by arc length
-        psi.append(np.stack([np.interp(target[i], cum[i], grid[i]) for i in range(len(A))]))
-        dl.append(np.repeat(total / n, n, axis=1))
-        side.append(np.full(n, j, np.int8))
-    return (np.concatenate(psi, axis=1) % (2 * math.pi), np.concatenate(dl, axis=1),
-            np.concatenate(side))
+    u = np.linspace(0.0, 1.0, _SIDE_TABLE + 1)
+    lo, hi = bounds[:, :4, None], bounds[:, 1:, None]
+    grid = lo + (hi - lo) * u
+    speed = np.hypot(np.sin(grid), r[:, None, None] * np.cos(grid))
+    cum = np.concatenate([np.zeros(grid.shape[:2] + (1,)),
+                          np.cumsum(0.5 * (speed[..., 1:] + speed[..., :-1]) * np.diff(grid, axis=-1),
+                                    axis=-1)], axis=-1)
+    total = cum[..., -1]
+    return grid, cum / total[..., None], total
 
 
 def _tube_faces(rings: int, around: int, cap_end: int | None) -> np.ndarray:
