@@ -75,7 +75,7 @@ def register(app: typer.Typer) -> None:
         from wtcli.plan.angles import blade_azimuths
         from wtcli.plan.config import load_mission
         from wtcli.plan.exports import export_all
-        from wtcli.plan.mission import PATTERNS, plan_mission
+        from wtcli.plan.mission import BUDGET_KEYS, PATTERNS, plan_mission
         from wtcli.plan.path_views import draw_plan
 
         if pattern not in PATTERNS:
@@ -125,6 +125,9 @@ def register(app: typer.Typer) -> None:
         for tid, c in cov.items():
             typer.echo(f"{tid}: predicted blade coverage {c['blade_average']:.1%} "
                        f"(worst side {c['min_side']:.1%}), tower/nacelle {c['structure']:.1%}")
+            b = s["time_budget"][tid]
+            typer.echo(f"{tid}: flight {b['total_s'] / 60:.1f} min = " + " + ".join(
+                f"{k[:-2].replace('_', ' ')} {b[k] / 60:.1f}" for k in BUDGET_KEYS))
         v = s["violations"]
         if any(v.values()):
             typer.echo(f"UNSAFE against the real turbines: {v} - {s['first_violation']}")

@@ -40,7 +40,8 @@ def _default(section: str, key: str) -> Any:
     return _DEFAULTS[section][key]
 
 TOP_KEYS = ("site", "camera", "fleet", "mission", "turbines")
-CAMERA_KEYS = ("sensor_width_mm", "focal_mm", "width_px", "height_px")
+CAMERA_KEYS = ("sensor_width_mm", "focal_mm", "width_px", "height_px", "min_photo_interval_s",
+               "shutter_s", "max_blur_px")
 FLEET_KEYS = ("uavs", "launch", "inspection_speed_m_s", "cruise_speed_m_s", "max_speed_m_s",
               "climb_rate_m_s", "battery_minutes", "battery_reserve_minutes", "battery_swap_s",
               "gimbal_pitch_min_deg", "gimbal_pitch_max_deg")
@@ -104,6 +105,31 @@ class Fleet:
 
 
 @dataclass(frozen=True)
+class Capture:
+    """How fast the inspection camera can shoot while the UAV moves (turbines.yaml ``camera``):
+    photos at least ``min_photo_interval_s`` apart, and a motion blur of at most ``max_blur_px``
+    pixels during the ``shutter_s`` exposure."""
+
+    min_photo_interval_s: float = float(_default("camera", "min_photo_interval_s"))
+    shutter_s: float = float(_default("camera", "shutter_s"))
+    max_blur_px: float = float(_default("camera", "max_blur_px"))
+
+    def __post_init__(self) -> None:
+        for name in ("min_photo_interval_s", "shutter_s", "max_blur_px"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"expected {name} > 0, got {getattr(self, name)}")
+
+    def blur_speed_m_s(self, gsd_mm: float) -> float:
+        """The fastest a camera imaging at ``gsd_mm`` may move across the surface: the image
+        moves v * shutter_s / GSD pixels during the exposure."""
+        return self.max_blur_px * gsd_mm / 1000.0 / self.shutter_s
+
+    def interval_speed_m_s(self, spacing_m: float) -> float:
+        """The fastest a UAV may fly photos ``spacing_m`` apart at the camera's photo interval."""
+        return spacing_m / self.min_photo_interval_s
+
+
+@dataclass(frozen=True)
 class Settings:
     safe_distance_m: float = float(_default("mission", "safe_distance_m"))
     tracking_margin_m: float = float(_default("mission", "tracking_margin_m"))
@@ -164,6 +190,7 @@ class Mission:
     settings: Settings = field(default_factory=Settings)
     site_origin: dict | None = None  # {"lat", "lon", "alt"} of ENU (0, 0, 0)
     extras: dict = field(default_factory=dict)  # turbine id -> TurbineExtras
+    capture: Capture = field(default_factory=Capture)  # the camera's photo interval and shutter
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "turbines", tuple(self.turbines))
@@ -318,6 +345,8 @@ def mission_from_dict(d: Any, where: str = "turbines.yaml", base_dir: str | Path
     camera = Camera(number(c, "width_px", w, 64, 100000, integer=True),
                     number(c, "height_px", w, 64, 100000, integer=True),
                     number(c, "focal_mm", w, 1, 2000), number(c, "sensor_width_mm", w, 1, 100))
+    capture = Capture(number(c, "min_photo_interval_s", w, 0.05, 60),
+                      number(c, "shutter_s", w, 1e-5, 1), number(c, "max_blur_px", w, 0.05, 10))
 
     # mission settings
     w = f"{where}: mission"
@@ -388,7 +417,7 @@ def mission_from_dict(d: Any, where: str = "turbines.yaml", base_dir: str | Path
         turbines.append(t)
         extras[t.id] = ex
     _apart(turbines, where)
-    return Mission(tuple(turbines), camera, fleet, settings, origin, extras)
+    return Mission(tuple(turbines), camera, fleet, settings, origin, extras, capture)
 
 
 def _turbine(td: Any, w: str, origin: dict | None, base_dir: Path) -> tuple[Turbine, TurbineExtras]:

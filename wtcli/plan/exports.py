@@ -10,7 +10,8 @@ ellipsoid-height difference). Commands used:
 
 * 22 NAV_TAKEOFF to the take-off altitude, 16 NAV_WAYPOINT (p2 acceptance radius, p4 yaw = the
   camera heading: PX4 turns to it, ArduPilot Copter ignores it), 21 NAV_LAND at home;
-* 178 DO_CHANGE_SPEED (p1 = 1 ground speed, p2 m/s) whenever the planned speed changes;
+* 178 DO_CHANGE_SPEED (p1 = 1 ground speed, p2 m/s, rounded down to 0.1) whenever the planned
+  speed changes;
 * 205 DO_MOUNT_CONTROL (p1 gimbal pitch, p7 = 2 MAVLink targeting) whenever the gimbal pitch
   changes, placed before the waypoint it is for;
 * 203 DO_DIGICAM_CONTROL (p5 = 1: shoot) after each photo waypoint.
@@ -21,6 +22,7 @@ ArduPilot's 196 DO_SET_ROI_WPNEXT_OFFSET is never used.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -92,7 +94,8 @@ def mission_items(plan: Plan, route: Route, first: int, last: int) -> tuple[list
         if j == 1:
             items.append(Item(22, 3, (0.0, 0.0, 0.0, yaw, lat, lon, alt)))
             continue
-        v = round(float(route.speed[i]), 1)
+        # Rounded down to 0.1 m/s: a photo leg never faster than its blur and interval limits.
+        v = max(0.1, math.floor(float(route.speed[i]) * 10 + 1e-6) / 10) if route.speed[i] > 0 else 0.0
         if v > 0 and v != speed:
             items.append(Item(178, 2, (1.0, v, -1.0, 0.0, None, None, None)))
             speed = v

@@ -20,7 +20,7 @@ import math
 import os
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -80,6 +80,71 @@ def pass_params(mission: Mission) -> tuple[PassParams, float, float]:
     return pp, gsd_eval, float(cam.gsd_mm(st))
 
 
+@dataclass(frozen=True)
+class Speeds:
+    """The speed of each kind of leg (``leg_speeds``)."""
+
+    capture: float  # photo legs: the fleet's inspection cap and the photo interval's limit
+    blur_per_m: float  # motion-blur limit per metre of camera-to-surface distance, m/s per m
+    closest: float  # standoff (m) assumed for a photo station that records none
+    turn: float  # inspection-speed legs with no photo at either end (arcs, joins, returns)
+    cruise: float  # transits
+    climb: float  # vertical speed limit
+    interval: float = 0.0  # the camera's shortest time between photos, s
+
+    def blur(self, standoff: float | None) -> float:
+        return self.blur_per_m * (self.closest if standoff is None else standoff)
+
+
+def speeds(mission: Mission, pp: PassParams) -> Speeds:
+    fl, cap = mission.fleet, mission.capture
+    v_fleet = min(fl.inspection_speed_m_s, fl.max_speed_m_s)
+    return Speeds(min(v_fleet, cap.interval_speed_m_s(pp.spacing(pp.standoff))),
+                  cap.blur_speed_m_s(float(pp.camera.gsd_mm(1.0))),
+                  max(pp.min_standoff, pp.standoff - 1.0),  # blade_chunk's closest candidates
+                  v_fleet, min(fl.cruise_speed_m_s, fl.max_speed_m_s), fl.climb_rate_m_s,
+                  cap.min_photo_interval_s)
+
+
+def capture_speed(mission: Mission, pp: PassParams) -> tuple[float, dict[str, float]]:
+    """The speed along the photo passes at the nominal standoff, and the limits it is the
+    slowest of: the fleet's ``inspection_speed_m_s`` (and ``max_speed_m_s``), the photo spacing
+    over the camera's ``min_photo_interval_s``, and the motion-blur limit ``max_blur_px`` * GSD /
+    ``shutter_s`` (a station closer to the surface, a finer GSD, is passed slower:
+    ``leg_speeds``)."""
+    fl, cap = mission.fleet, mission.capture
+    limits = {"fleet_m_s": min(fl.inspection_speed_m_s, fl.max_speed_m_s),
+              "photo_interval_m_s": cap.interval_speed_m_s(pp.spacing(pp.standoff)),
+              "motion_blur_m_s": cap.blur_speed_m_s(float(pp.camera.gsd_mm(pp.standoff)))}
+    return min(limits.values()), limits
+
+
+def leg_speeds(wps: list[WP], sp: Speeds) -> np.ndarray:
+    """The speed of each leg wps[i] -> wps[i + 1]: cruise (``slow`` False), else the capture
+    speed between two photos, the turn speed on the others; and no photo station is passed
+    faster than its motion-blur limit: at least one leg beside it is no faster (the flight's
+    speed at a waypoint is at most the slower of its two legs: fly's reference), else the leg
+    into it is slowed."""
+    n = len(wps)
+    if n < 2:
+        return np.zeros(0)
+    slow = np.array([w.slow for w in wps[1:]], bool)
+    photo = np.array([w.photo for w in wps], bool)
+    vb = np.array([sp.blur(w.standoff) if w.photo else np.inf for w in wps])
+    both = slow & photo[:-1] & photo[1:]
+    v = np.where(~slow, sp.cruise, np.where(both, sp.capture, sp.turn))
+    v = np.where(both, np.minimum(v, np.minimum(vb[:-1], vb[1:])), v)
+    v_in = np.r_[np.inf, v]  # per waypoint: the legs into and out of it
+    v_out = np.r_[v, np.inf]
+    over = photo & (np.minimum(v_in, v_out) > vb)
+    idx = np.nonzero(over)[0]
+    idx_in = idx[idx > 0]
+    v[idx_in - 1] = vb[idx_in]
+    if len(idx) and idx[0] == 0:
+        v[0] = min(v[0], vb[0])
+    return v
+
+
 LAUNCH_AHEAD_M = 60.0  # the automatic launch point: this far in front of the first rotor (or
 # its tip radius + 15 m if farther), on the ground (fleet.launch in turbines-defaults.yaml)
 
@@ -119,7 +184,8 @@ def turbine_chunks(t: Turbine, site: Site, pp: PassParams, mission: Mission,
     while site.clearance(sp[None], pp.required)[0] < pp.required and k < 50:  # push S_p out until it is clear
         sp = sp + t.axis * 2.0
         k += 1
-    chunks = [Chunk(t.id, "overview", [WP(sp, _unit(z.center - sp), True, f"{t.id}/overview")])]
+    chunks = [Chunk(t.id, "overview", [WP(sp, _unit(z.center - sp), True, f"{t.id}/overview",
+                                          standoff=float(site.clearance(sp[None])[0]))])]
     try:
         for k in blade_order(t):
             chunks.append(blade_chunk(t, k, site, pp, f"{t.id}/blade{k + 1}",
@@ -167,8 +233,13 @@ def _leg_times(P: np.ndarray, v: float | np.ndarray, climb: float) -> np.ndarray
     return np.where(d > 0, np.maximum(d / v, np.abs(D[:, 2]) / climb), 0.0)
 
 
-def chunk_time(ch: Chunk, v_slow: float, climb: float) -> float:
-    return float(_leg_times(np.array([w.pos for w in ch.wps]).reshape(-1, 3), v_slow, climb).sum())
+def chunk_time(ch: Chunk, sp: Speeds) -> float:
+    """Flight time of a chunk's legs at ``leg_speeds``, with the photo-interval waits."""
+    if len(ch.wps) < 2:
+        return 0.0
+    dt = _leg_times(np.array([w.pos for w in ch.wps]), leg_speeds(ch.wps, sp), sp.climb)
+    waits = _photo_waits(dt, np.array([w.photo for w in ch.wps]), sp.interval)
+    return float(dt.sum() + waits.sum())
 
 
 # ---- ordering and splitting --------------------------------------------------------------------------
@@ -245,9 +316,8 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
     it is paid from the battery. ``plan_mission`` repeats the dry run until it asks for no new
     leg, so the real run decides on the legs it flies, and checks every sortie afterwards."""
     fl, s = mission.fleet, mission.settings
-    v_slow = min(fl.inspection_speed_m_s, fl.max_speed_m_s)
-    v_fast = min(fl.cruise_speed_m_s, fl.max_speed_m_s)
-    climb = fl.climb_rate_m_s
+    sp = speeds(mission, pp)
+    v_fast, climb = sp.cruise, sp.climb
     above = launch + Z * s.takeoff_altitude_m
     usable = fl.usable_battery_s
     first_fwd = _unit(np.r_[(chunks[0].start - launch)[:2], 0.0] + 1e-9)
@@ -288,7 +358,7 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
     takeoff()
     sortie = _leg_time(launch, above, v_fast, climb)
     for i, ch in enumerate(chunks):
-        t_ch = times[i] if times is not None else chunk_time(ch, v_slow, climb)
+        t_ch = times[i] if times is not None else chunk_time(ch, sp)
         t_to = leg_s(wps[-1].pos, ch.start)
         t_back = leg_s(ch.end, above) + s.takeoff_altitude_m / climb
         if sortie + t_to + t_ch + t_back > usable:
@@ -308,28 +378,32 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
             t_to = leg_s(wps[-1].pos, ch.start)
         prev = wps[-1].pos
         wps.extend(link(prev, ch.start, "transit", True, f"to {ch.turbine} {ch.name}"))
-        wps.append(WP(ch.wps[0].pos, ch.wps[0].fwd, ch.wps[0].photo, ch.wps[0].component, False))
+        wps.append(replace(ch.wps[0], slow=False))  # the transit leg into the chunk
         wps.extend(ch.wps[1:])
         sortie += t_to + t_ch
     go_home()
     if missing is not None:
         return None
-    return _timed_route(uav, wps, swaps, v_slow, v_fast, climb, fl.battery_swap_s,
-                        fl.gimbal_pitch_range)
+    return _timed_route(uav, wps, swaps, sp, fl.battery_swap_s, fl.gimbal_pitch_range,
+                        sp.interval, sorted({c.turbine for c in chunks}))
 
 
-def _timed_route(uav: str, wps: list[WP], swaps: list[int], v_slow: float, v_fast: float,
-                 climb: float, swap_s: float, pitch_range: tuple[float, float] = (-90.0, 90.0)
-                 ) -> Route:
+def _timed_route(uav: str, wps: list[WP], swaps: list[int], sp: Speeds, swap_s: float,
+                 pitch_range: tuple[float, float] = (-90.0, 90.0), photo_interval_s: float = 0.0,
+                 turbines: list[str] | None = None) -> Route:
+    """Times the waypoints. Two photos are never closer in time than ``photo_interval_s`` (the
+    camera's): a leg that would be is flown slower (its speed is its length over its time).
+    The route's summary carries its ``time_budget`` per turbine id in ``turbines``."""
     n = len(wps)
     pos = np.array([w.pos for w in wps])
-    slow = np.array([w.slow for w in wps[1:]], bool)
-    dt = _leg_times(pos, np.where(slow, v_slow, v_fast), climb)
+    dt = _leg_times(pos, leg_speeds(wps, sp), sp.climb)
     L = np.linalg.norm(np.diff(pos, axis=0), axis=1)
     extra = np.zeros(n - 1)
     extra[[i - 1 for i in swaps]] = swap_s
-    t = np.r_[0.0, np.cumsum(dt + extra)]
-    speed = np.r_[0.0, np.divide(L, dt, out=np.zeros(n - 1), where=dt > 0)]
+    photo = np.array([w.photo for w in wps], bool)
+    wait = _photo_waits(dt + extra, photo, photo_interval_s)
+    t = np.r_[0.0, np.cumsum(dt + extra + wait)]
+    speed = np.r_[0.0, np.divide(L, dt + wait, out=np.zeros(n - 1), where=dt + wait > 0)]
     # The camera keeps the last forward given (none: the one before).
     have = np.array([w.fwd is not None for w in wps])
     have[0] = True
@@ -344,10 +418,82 @@ def _timed_route(uav: str, wps: list[WP], swaps: list[int], v_slow: float, v_fas
     # included): what the usable battery (battery_minutes - reserve) must cover.
     starts, ends = [0] + list(swaps), [i - 1 for i in swaps] + [n - 1]
     sorties = [float(t[b] - t[a]) for a, b in zip(starts, ends)]
-    return Route(uav, t, pos, speed, yaw, pitch, np.array([w.photo for w in wps]),
-                 np.array([w.component for w in wps], dtype=object),
+    comp = np.array([w.component for w in wps], dtype=object)
+    budget = _time_budget(wps, dt, wait, extra, turbines or [])
+    return Route(uav, t, pos, speed, yaw, pitch, photo, comp,
                  summary={"battery_swaps": len(swaps), "sorties": len(swaps) + 1,
-                          "longest_sortie_s": max(sorties)})
+                          "longest_sortie_s": max(sorties), "time_budget": budget})
+
+
+def _photo_waits(dt: np.ndarray, photo: np.ndarray, interval: float) -> np.ndarray:
+    """Extra seconds per leg so that consecutive photos are at least ``interval`` apart."""
+    wait = np.zeros(len(dt))
+    if interval <= 0 or photo.sum() < 2:
+        return wait
+    t = np.r_[0.0, np.cumsum(dt)]
+    off, last = 0.0, None
+    for j in np.nonzero(photo)[0]:
+        tj = t[j] + off
+        if last is not None and tj - last < interval - 1e-9:
+            w = interval - (tj - last)
+            wait[j - 1] += w
+            off += w
+            tj += w
+        last = tj
+    return wait
+
+
+# Where a turbine's minutes go (summary.time_budget; docs/plan.md "Time budget").
+BUDGET_KEYS = ("capture_s", "turns_s", "hover_s", "transit_s", "climbs_s", "battery_swaps_s")
+
+
+def _time_budget(wps: list[WP], dt: np.ndarray, wait: np.ndarray, swap: np.ndarray,
+                 turbines: list[str]) -> dict[str, dict[str, float]]:
+    """Each leg's time, by turbine and kind: ``capture_s`` along a pass between two photos
+    (slowed to the photo interval where it binds), ``turns_s`` the other inspection-speed legs (at the turn speed)
+    (arcs round a blade, joins between passes, the blade's return leg, extra views' detours),
+    ``hover_s`` waiting for the camera elsewhere, ``transit_s`` cruise-speed legs (between
+    components and turbines, to and from the launch point), ``climbs_s`` the vertical take-off
+    and landing at the launch point, ``battery_swaps_s`` on the ground. A leg belongs to the
+    turbine of the component it ends in; launch, transit and return legs to the turbine flown
+    next (the last return to the last one)."""
+    n = len(wps)
+    ids = sorted(turbines, key=len, reverse=True)  # the longest id that prefixes a component
+    owner: list[str | None] = []
+    for w in wps[1:]:
+        owner.append(next((tid for tid in ids if w.component.startswith(f"{tid}/")), None))
+    nxt = None
+    for i in range(n - 2, -1, -1):  # launch/transit/return legs: the next turbine flown
+        if owner[i] is None:
+            owner[i] = nxt
+        nxt = owner[i]
+    prev = None
+    for i in range(n - 1):  # after the last component: the last turbine
+        if owner[i] is None:
+            owner[i] = prev
+        prev = owner[i]
+    out = {tid: dict.fromkeys(BUDGET_KEYS, 0.0) for tid in turbines}
+    for i in range(n - 1):
+        b = out.get(owner[i])
+        if b is None:
+            continue
+        a, z = wps[i], wps[i + 1]
+        if swap[i] > 0:
+            b["battery_swaps_s"] += float(swap[i])
+        vertical = float(np.linalg.norm(z.pos[:2] - a.pos[:2])) < 1e-6
+        if z.component in ("launch", "return") and vertical:
+            b["climbs_s"] += float(dt[i])
+            b["hover_s"] += float(wait[i])
+        elif not z.slow:
+            b["transit_s"] += float(dt[i])
+            b["hover_s"] += float(wait[i])
+        elif a.photo and z.photo:
+            b["capture_s"] += float(dt[i] + wait[i])
+        else:
+            b["turns_s"] += float(dt[i])
+            b["hover_s"] += float(wait[i])
+    return {tid: {k: round(v, 2) for k, v in b.items()} | {"total_s": round(sum(b.values()), 2)}
+            for tid, b in out.items()}
 
 
 # ---- checks ---------------------------------------------------------------------------------------------
@@ -426,8 +572,8 @@ def _tour(job: tuple) -> tuple[list[Chunk], dict, list[float]]:
     site, pp, s, fl = job[1], job[2], job[3].settings, job[3].fleet
     links = dict(_link((site, a.end, b.start, pp.leg_required, s.min_altitude_m))
                  for a, b in zip(chunks, chunks[1:]))
-    v_slow = min(fl.inspection_speed_m_s, fl.max_speed_m_s)
-    return chunks, links, [chunk_time(c, v_slow, fl.climb_rate_m_s) for c in chunks]
+    sp = speeds(job[3], pp)
+    return chunks, links, [chunk_time(c, sp) for c in chunks]
 
 
 def _chunks(job: tuple) -> list[Chunk]:
@@ -567,7 +713,7 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
         notes += [n for c in chunks for n in c.notes]
 
     # Visit order and split across UAVs (balanced by estimated flight time).
-    v_slow = min(fl.inspection_speed_m_s, fl.max_speed_m_s)
+    v_slow = capture_speed(mission, pp)[0]  # the split's estimate (chunk times are exact)
     v_fast = min(fl.cruise_speed_m_s, fl.max_speed_m_s)
     ids = [t.id for t in assumed]
     starts = np.array([tours[i][0].start for i in ids])
@@ -665,6 +811,10 @@ def _summary(routes: list[Route], mission: Mission, pattern: str, check: dict, c
     for u in mission.fleet.uavs:
         per_uav.setdefault(u, {"length_m": 0.0, "time_s": 0.0, "photos": 0, "turbines": [],
                                "battery_swaps": 0, "sorties": 0})
+    budget: dict[str, dict[str, float]] = {}
+    for r in routes:
+        budget.update(r.summary.get("time_budget", {}))
+    v_cap, limits = capture_speed(mission, pp)
     zones = {}
     for t in mission.turbines:
         z = zone(t, mission.extra(t.id).measured_tips)
@@ -687,6 +837,14 @@ def _summary(routes: list[Route], mission: Mission, pattern: str, check: dict, c
         "first_violation": check["first_violation"],
         "per_uav": per_uav,
         "per_component": per_comp,
+        # Per turbine, where its flight time goes (mission._time_budget; docs/plan.md).
+        "time_budget": {t.id: budget.get(t.id, dict.fromkeys((*BUDGET_KEYS, "total_s"), 0.0))
+                        for t in mission.turbines},
+        "capture": {"speed_m_s": v_cap, "limits": limits,
+                    "min_photo_interval_s": mission.capture.min_photo_interval_s,
+                    "shutter_s": mission.capture.shutter_s,
+                    "max_blur_px": mission.capture.max_blur_px,
+                    "photo_spacing_m": pp.spacing(pp.standoff)},
         "predicted_coverage": coverage,
         "requested_gsd_mm": s.target_gsd_mm,
         "achieved_gsd_mm": gsd_nominal,

@@ -51,6 +51,9 @@ class WP:
     photo: bool
     component: str
     slow: bool = True  # inspection speed (True) or cruise speed (False) on the leg ending here
+    # A photo station's camera-to-surface distance (m), which sets its motion-blur speed limit
+    # (mission.capture_speed); None: the closest the passes use (the strictest limit).
+    standoff: float | None = None
 
 
 @dataclass(frozen=True)
@@ -327,7 +330,8 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
     d, c, n = turbine.blade_frame(k)
     spacing = pp.spacing(pp.standoff)
     S = blade_stations(turbine, spacing)
-    passes: list[tuple[str, np.ndarray, np.ndarray]] = []  # (side, positions, fwd) root -> tip
+    # (side, positions, fwd, standoffs) root -> tip
+    passes: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]] = []
     extra = [0.0] + [e for e in (0.5, 1.0, 1.5) if pp.standoff + e <= pp.max_standoff]
     closer = [e for e in (-0.5, -1.0) if pp.standoff + e >= pp.min_standoff]
     for side in BLADE_SIDES:
@@ -342,7 +346,7 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
         if forced:
             blocked[:] = True
         if not blocked.any():
-            passes.append((side, pos0, fwd0))
+            passes.append((side, pos0, fwd0, np.full(len(S), pp.standoff)))
             continue
         if not forced:
             why = f" ({int((~aim0).sum())} beyond {pp.gimbal_text()})" if (~aim0).any() else ""
@@ -355,7 +359,7 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
             if (~aim0).any():  # also the least turn that brings the aim within the gimbal's reach
                 ag = _gimbal_alpha(c, n, g0, sign, pp.pitch_range)
                 al = np.unique(np.r_[alphas, [] if ag is None else [ag]])
-            pos, fwd = pos0.copy(), fwd0.copy()
+            pos, fwd, st = pos0.copy(), fwd0.copy(), np.full(len(S), pp.standoff)
             keep = ~blocked if sign > 0 else np.zeros(len(S), bool)
             # Every candidate (station, alpha, extra standoff) at once, in preference order.
             J, AL, EX = np.meshgrid(jj, al, np.array(closer + extra), indexing="ij")
@@ -371,10 +375,10 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
             for n_j, j in enumerate(jj):
                 if found[n_j]:
                     ci = n_j * per + first[n_j]
-                    pos[j], fwd[j] = cp[ci], cf[ci]
+                    pos[j], fwd[j], st[j] = cp[ci], cf[ci], pp.standoff + EX[ci]
             keep[jj] = found
             if keep.any():
-                passes.append((side, pos[keep], fwd[keep]))
+                passes.append((side, pos[keep], fwd[keep], st[keep]))
             # Dropped: no safe candidate (what blocks them), or only ones the gimbal cannot aim.
             aimless = ~found & safe.reshape(len(jj), per).any(axis=1)
             if aimless.any():
@@ -389,9 +393,9 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
                                    f"(blocked by {', '.join(parts)}): dropped")
 
     # Alternate out and back; join passes with arcs around the blade axis.
-    for i, (side, pos, fwd) in enumerate(passes):
+    for i, (side, pos, fwd, st) in enumerate(passes):
         if i % 2 == 1:
-            pos, fwd = pos[::-1], fwd[::-1]
+            pos, fwd, st = pos[::-1], fwd[::-1], st[::-1]
         comp = f"{label}/{side}"
         if chunk.wps:
             joined = False
@@ -403,7 +407,7 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
                 except _Blocked:
                     if len(pos) < 3:
                         break
-                    pos, fwd = pos[1:], fwd[1:]
+                    pos, fwd, st = pos[1:], fwd[1:], st[1:]
             if not joined:
                 chunk.notes.append(f"{comp}: no safe path from the previous pass (blocked by "
                                    f"{site.nearest_part(pos[0])[0]}): pass dropped")
@@ -413,7 +417,8 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
                                    "previous pass: dropped")
         # A station no way round the blade or detour reaches (wedged between the root and the
         # nacelle at a large safe distance) is left out with a note; coverage then decides.
-        append_chain(chunk, site, pp, [WP(p, f, True, comp) for p, f in zip(pos, fwd)],
+        append_chain(chunk, site, pp, [WP(p, f, True, comp, standoff=float(d))
+                                       for p, f, d in zip(pos, fwd, st)],
                      droppable=True, blade=(turbine, k))
     wps = chunk.wps
     if not wps:
@@ -603,8 +608,9 @@ def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams) -> Chunk:
             aimless = int((~pp.aim_ok(fwd)).sum())
             chunk.notes.append(f"{comp}: {int((~keep).sum())} station(s) too close to a part"
                                + (f" or beyond {pp.gimbal_text()}" if aimless else "") + ": dropped")
-        append_chain(chunk, site, pp, [WP(p, f, True, comp) for p, f in zip(pos[keep], fwd[keep])],
-                     droppable=True)
+        # _back_off only moves a station out (a coarser GSD: a looser blur limit)
+        append_chain(chunk, site, pp, [WP(p, f, True, comp, standoff=pp.standoff)
+                                       for p, f in zip(pos[keep], fwd[keep])], droppable=True)
     return chunk
 
 
@@ -651,7 +657,7 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
             if len(arc):
                 arc = arc[_filter_stations(site, pp, arc)]  # clear of every part and the ground
             new += [WP(v, None, False, comp) for v in arc]
-        new += [WP(p, f, True, comp) for p, f in zip(pos[keep], fwd[keep])]
+        new += [WP(p, f, True, comp, standoff=pp.standoff) for p, f in zip(pos[keep], fwd[keep])]
         append_chain(chunk, site, pp, new, droppable=True)
     return chunk
 

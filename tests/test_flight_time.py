@@ -1,0 +1,153 @@
+"""Flight time: capture while moving (photo interval, motion blur, the fleet's cap), the speed of
+each kind of leg, and the per-turbine time budget (docs/plan.md, "Capture while moving" and
+"Time budget")."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from wtcli.errors import ConfigError
+from wtcli.geometry import Camera, Turbine
+from wtcli.plan.config import Capture, Fleet, Mission, Settings, default_dict, mission_from_dict
+from wtcli.plan.mission import (BUDGET_KEYS, Speeds, _photo_waits, capture_speed, chunk_time,
+                                leg_speeds, pass_params, plan_mission)
+from wtcli.plan.paths import WP, Chunk
+
+CAM = Camera(5456, 3632, 16, 23.2)
+
+
+def _wp(x, photo, slow=True, standoff=None, comp="T1/blade1/leading_edge"):
+    return WP(np.array([float(x), 0.0, 50.0]), np.array([0.0, 1.0, 0.0]), photo, comp, slow,
+              standoff)
+
+
+SP = Speeds(capture=2.8, blur_per_m=0.5, closest=4.0, turn=4.0, cruise=8.0, climb=3.0)
+
+
+def test_leg_speeds_by_kind_and_blur_at_each_station():
+    # photo-photo legs at the capture speed, capped by each end's blur limit (0.5 m/s per m
+    # of standoff: 5 m -> 2.5, 4 m -> 2.0); no-photo legs at the turn speed; transits cruise
+    wps = [_wp(0, True, standoff=5.0), _wp(2, True, standoff=5.0), _wp(4, True, standoff=4.0),
+           _wp(10, False), _wp(20, False), _wp(60, False, slow=False)]
+    v = leg_speeds(wps, SP)
+    assert v.tolist() == [2.5, 2.0, 4.0, 4.0, 8.0]
+    # the station at x=4 is passed at most at its limit: the slower of its legs is 2.0
+    assert min(v[1], v[2]) <= 2.0
+
+
+def test_a_photo_between_two_fast_legs_gets_the_leg_into_it_slowed():
+    # an extra view reached by turns on both sides, with no recorded standoff: the closest
+    # standoff's limit (0.5 * 4 = 2 m/s) applies to the leg into it
+    wps = [_wp(0, False), _wp(10, True), _wp(20, False), _wp(120, True, slow=False, standoff=40.0),
+           _wp(200, False, slow=False)]
+    v = leg_speeds(wps, SP)
+    assert v[0] == pytest.approx(2.0) and v[1] == 4.0
+    # a far photo (the overview, 40 m away: 20 m/s) between cruise legs keeps the cruise speed
+    assert v[2] == 8.0 and v[3] == 8.0
+
+
+def test_photo_waits_keep_the_camera_interval():
+    dt = np.array([0.5, 0.5, 2.0, 0.1, 0.1])
+    photo = np.array([True, True, True, False, False, True])
+    w = _photo_waits(dt, photo, 0.7)
+    t = np.r_[0.0, np.cumsum(dt + w)]
+    assert np.diff(t[photo]).min() == pytest.approx(0.7)
+    assert w.tolist() == pytest.approx([0.2, 0.2, 0.0, 0.0, 0.0])  # only where it binds
+    assert not _photo_waits(dt, photo, 0.0).any()
+
+
+def test_chunk_time_counts_the_photo_interval_waits():
+    # what the battery decisions rest on: photos 0.5 m apart at 2.5 m/s (0.2 s) wait for 0.7 s
+    ch = Chunk("T1", "blade1", [_wp(0.5 * k, True, standoff=5.0) for k in range(11)])
+    assert chunk_time(ch, SP) == pytest.approx(10 * 0.2)
+    assert chunk_time(ch, replace(SP, interval=0.7)) == pytest.approx(10 * 0.7)
+
+
+def test_capture_speed_is_the_slowest_of_cap_interval_and_blur():
+    m = Mission((Turbine.with_rotor_azimuth(90, id="T1", base=(0, 0, 0), hub_height=80,
+                                            rotor_diameter=90, yaw_deg=0),), CAM)
+    pp = pass_params(m)[0]
+    v, lim = capture_speed(m, pp)
+    gsd = float(CAM.gsd_mm(pp.standoff))
+    assert lim["motion_blur_m_s"] == pytest.approx(1.0 * gsd / 1000 / 0.0005)
+    assert lim["photo_interval_m_s"] == pytest.approx(pp.spacing(pp.standoff) / 0.7)
+    assert lim["fleet_m_s"] == 4.0 and v == min(lim.values())
+    slow_shutter = replace(m, capture=Capture(shutter_s=1 / 500))
+    assert capture_speed(slow_shutter, pp)[0] == pytest.approx(gsd / 1000 * 500)
+    capped = replace(m, fleet=replace(m.fleet, inspection_speed_m_s=1.0))
+    assert capture_speed(capped, pp)[0] == 1.0
+
+
+def test_camera_capture_keys_are_read_and_checked():
+    d = default_dict()
+    d["turbines"] = [{"id": "T1", "position": [0, 0, 0], "hub_height_m": 80, "rotor_diameter_m": 90, "yaw_deg": 0}]
+    d["camera"].update(min_photo_interval_s=1.5, shutter_s=0.001, max_blur_px=0.5)
+    m = mission_from_dict(d)
+    assert m.capture == Capture(1.5, 0.001, 0.5)
+    assert Capture() == Capture(**{k: default_dict()["camera"][k] for k in
+                                   ("min_photo_interval_s", "shutter_s", "max_blur_px")})
+    d["camera"]["shutter_s"] = 0
+    with pytest.raises(ConfigError, match=r"camera.*shutter_s"):
+        mission_from_dict(d)
+
+
+@pytest.fixture(scope="module")
+def swapped_plan():
+    """One turbine on batteries too small for it in one sortie: a swap, every kind of leg."""
+    t = Turbine.with_rotor_azimuth(90, id="T1", base=(0, 0, 0), hub_height=80, rotor_diameter=90,
+                                   yaw_deg=0)
+    fleet = Fleet(battery_minutes=6.0, battery_reserve_minutes=1.0, battery_swap_s=120.0)
+    m = Mission((t,), CAM, fleet=fleet, settings=Settings(min_side_coverage=0.0))
+    return m, plan_mission(m)
+
+
+def test_time_budget_adds_up_to_the_flight_and_names_every_kind(swapped_plan):
+    m, plan = swapped_plan
+    s = plan.summary
+    b = s["time_budget"]["T1"]
+    assert set(b) == {*BUDGET_KEYS, "total_s"}
+    r = plan.routes[0]
+    assert b["total_s"] == pytest.approx(r.duration_s, abs=0.05)
+    assert b["total_s"] == pytest.approx(sum(b[k] for k in BUDGET_KEYS), abs=0.05)
+    assert r.summary["battery_swaps"] >= 1
+    assert b["battery_swaps_s"] == pytest.approx(120.0 * r.summary["battery_swaps"])
+    sorties = r.summary["sorties"]
+    # take-off climb and landing descent: takeoff_altitude_m at climb_rate_m_s, each sortie
+    assert b["climbs_s"] == pytest.approx(2 * sorties * 10.0 / 3.0, abs=0.05)
+    assert b["capture_s"] > b["turns_s"] > 0 and b["transit_s"] > 0
+    assert s["per_uav"]["UAV1"]["time_budget"] == s["time_budget"]
+
+
+def test_photos_are_flown_within_the_capture_limits(swapped_plan):
+    m, plan = swapped_plan
+    s = plan.summary
+    r = plan.routes[0]
+    v_cap = s["capture"]["speed_m_s"]
+    assert v_cap == pytest.approx(min(s["capture"]["limits"].values()))
+    i = np.nonzero(r.photo)[0]
+    # consecutive photos at least the camera's interval apart
+    assert np.diff(r.t[i]).min() >= m.capture.min_photo_interval_s - 1e-6
+    # every inspection photo: the slower of the legs beside it within the capture speed (the
+    # overview, tens of metres from the rotor, has a blur limit above the cruise speed)
+    near = i[[not str(c).endswith("/overview") for c in r.component[i]]]
+    assert len(near) == len(i) - 1
+    v_in = r.speed[near]
+    v_out = np.r_[r.speed[1:], np.inf][near]
+    assert (np.minimum(v_in, v_out) <= v_cap + 1e-6).all()
+    # and the passes do fly at it (not at the fleet's cap)
+    both = r.photo[1:] & r.photo[:-1] & (np.diff(r.t) > 0)
+    assert np.median(r.speed[1:][both]) == pytest.approx(v_cap, rel=0.05)
+
+
+def test_a_slower_camera_makes_a_longer_flight_and_more_capture_time(swapped_plan):
+    m, plan = swapped_plan
+    # the same chunks on a battery that holds the slower components
+    slow = plan_mission(replace(m, capture=Capture(min_photo_interval_s=2.0),
+                                fleet=replace(m.fleet, battery_minutes=60.0)))
+    b0, b1 = plan.summary["time_budget"]["T1"], slow.summary["time_budget"]["T1"]
+    assert slow.summary["capture"]["limits"]["photo_interval_m_s"] < 1.0
+    assert b1["capture_s"] > 2 * b0["capture_s"]
+    assert slow.summary["photos"] == plan.summary["photos"]  # the same photos, flown slower
