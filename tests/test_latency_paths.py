@@ -100,3 +100,26 @@ def test_cli_lets_openmp_threads_sleep_unless_told_otherwise():
                           capture_output=True, timeout=120, env=env)
     assert json.loads(done.stdout.splitlines()[-1]) == "PASSIVE"
     assert _python(code, {"OMP_WAIT_POLICY": "ACTIVE"}) == "ACTIVE"
+
+
+def test_fast_photo_chain_runs_the_network_once_and_reads_the_same_angles(monkeypatch):
+    """``plan --fast``: one backbone pass instead of four on the sample photo (its turbine is
+    small enough for a second look; each look detects the photo and its mirror), and the
+    blade angles within half a degree of the full chain's."""
+    from wtcli.chain import photo_to_pitch
+    from wtcli.segment.infer import load_model
+
+    model = load_model()
+    passes = []
+    forward = model.backbone.forward
+    monkeypatch.setattr(model.backbone, "forward", lambda x: passes.append(1) or forward(x))
+    photo = ROOT / "sample_images" / "images" / "00000.jpg"
+    full = photo_to_pitch(photo, 3, one_short_ok=True)
+    n_full = len(passes)
+    fast = photo_to_pitch(photo, 3, one_short_ok=True, fast=True)
+    assert (n_full, len(passes) - n_full) == (4, 1)
+    assert full.error is None and fast.error is None
+    a = sorted(b.phi_deg for b in full.result.blades)
+    b = sorted(b.phi_deg for b in fast.result.blades)
+    assert len(a) == len(b) == 3
+    assert max(abs((x - y + 180) % 360 - 180) for x, y in zip(a, b)) < 0.5

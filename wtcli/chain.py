@@ -41,12 +41,14 @@ class PhotoPitch:
 
 
 def photo_input(path: str | Path, area_threshold: float | None = None,
-                candidate_floor: float | None = CANDIDATE_FLOOR) -> tuple[PitchInput, Instances]:
+                candidate_floor: float | None = CANDIDATE_FLOOR, fast: bool = False
+                ) -> tuple[PitchInput, Instances]:
     """Segment one photo file with the shipped model at its default score threshold, keeping the
     blades scoring at least ``candidate_floor`` (None: none) as rotor-completion candidates, and
     find its contours (``find_contours``, as for an instances JSON). Returns the pitch input (its
     contours or the error that stopped them; the photo as overlay background) and the instances.
-    An unreadable file is an InputError."""
+    An unreadable file is an InputError. ``fast``: one pass of the network, without the mirror
+    pass and the second look (``segment --no-flip --no-zoom``; ``plan --fast``)."""
     from wtcli.segment.batch import read_image
     from wtcli.segment.infer import segment_image  # torch: loaded only when a photo is given
 
@@ -56,7 +58,7 @@ def photo_input(path: str | Path, area_threshold: float | None = None,
     rec = {"id": 1, "file_name": path.name, "path": str(path), "width": int(img.shape[1]),
            "height": int(img.shape[0])}
     inst = segment_image(img, score_threshold=DEFAULT_SCORE_THRESHOLD,
-                         candidate_floor=candidate_floor)
+                         candidate_floor=candidate_floor, flip=not fast, zoom=not fast)
     try:
         cs = require_contours(find_contours(inst, thr, image=rec, source=str(path)))
         return PitchInput(cs, None, rec, (path,), DEFAULT_SCORE_THRESHOLD), inst
@@ -67,7 +69,7 @@ def photo_input(path: str | Path, area_threshold: float | None = None,
 def photo_to_pitch(path: str | Path, expected_blades: int | None = 3, *,
                    one_short_ok: bool = False, rotor_blades: int | None = None,
                    area_threshold: float | None = None, score_threshold: float | None = None,
-                   candidate_floor: float | None = CANDIDATE_FLOOR) -> PhotoPitch:
+                   candidate_floor: float | None = CANDIDATE_FLOOR, fast: bool = False) -> PhotoPitch:
     """Segment -> contours -> pitch for one photo file.
 
     ``expected_blades``: the blade count the result must have (None or 0: any count >= 1);
@@ -76,8 +78,8 @@ def photo_to_pitch(path: str | Path, expected_blades: int | None = 3, *,
     rotor's blade count, what a low-score blade may complete it to (default
     ``expected_blades``, else 3). ``score_threshold``: what pitch counts (None: the
     segmenter's 0.5). A wrong count or no contours is the result's ``error`` (a PerceptionError
-    message), not raised."""
-    inp, inst = photo_input(path, area_threshold, candidate_floor)
+    message), not raised. ``fast``: as ``photo_input``'s."""
+    inp, inst = photo_input(path, area_threshold, candidate_floor, fast)
     if inp.contours is None:
         return PhotoPitch(inp, inst, None, inp.error)
     thr = inp.score_threshold if score_threshold is None else score_threshold

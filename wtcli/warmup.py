@@ -1,13 +1,15 @@
-"""Compile the planner's numba kernels once, ahead of the first plan.
+"""Compile the planner's and the simulator's numba kernels once, ahead of the first plan.
 
     python -m wtcli.warmup
 
 The clearance, site and coverage kernels (``wtcli/geometry/*_kernel.py``,
-``wtcli/plan/clearance_site_kernel.py``) are compiled on a machine's first use, 10-20 s on two cores,
+``wtcli/plan/clearance_site_kernel.py``) and the flight's rigid-body physics
+(``wtcli/fly/rigid.py``) are compiled on a machine's first use, 10-20 s on two cores,
 then loaded from numba's cache (the package's ``__pycache__``) in a fraction of a second.
 ``scripts/setup-venv.sh`` runs this, so that a user's first ``plan`` or ``fly`` does not pay
-it. It goes through the same calls the planner makes, so the argument types (and hence the
-compiled versions) are the ones a plan uses.
+it. It goes through the same calls the planner and ``fly`` make, so the argument types (and
+hence the compiled versions) are the ones they use (``tests/test_latency_paths.py`` checks that
+a plan then compiles nothing).
 """
 
 from __future__ import annotations
@@ -40,7 +42,21 @@ def warm_up() -> float:
     samples = t.surface_samples(2.0)
     R = np.stack([look_at_rotation(p, t.hub_center) for p in P])
     measure_coverage(samples, Camera(5456, 3632, 16, 23.2), P, R, 2.0)
+    _warm_flight()
     return time.perf_counter() - t0
+
+
+def _warm_flight() -> None:
+    """``fly``'s rigid-body kernel, with the argument types ``wtcli.fly.sim`` passes (Python
+    floats and ints from its lists, float64 arrays)."""
+    from wtcli.fly import rigid
+
+    g = 9.81
+    S = rigid.initial_state(np.zeros(3), g)
+    P = rigid.params(0.5, 5.0, 4.0, 0.3, 0.02, 0.1, 200.0, 0.05, 30.0, g)
+    wind = np.ascontiguousarray(np.zeros((4, 3)), dtype=float)
+    rigid.substeps(S, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, wind, 0 * 2, 2, 0.0, 0.0, 0.0, P, 0.05 / 2,
+                   np.zeros(6))
 
 
 if __name__ == "__main__":

@@ -46,8 +46,9 @@ def _owner(mission: Mission, tid: str | None, path: Path, image_name: str | None
                      f"({ids[0]}={path}) or name it in that turbine's 'photo' key")
 
 
-def _pitch_results(path: Path, expected: int):
-    """[(result, image name)] of a pitch JSON or of a photo run through segment/contours/pitch."""
+def _pitch_results(path: Path, expected: int, fast: bool = False):
+    """[(result, image name)] of a pitch JSON or of a photo run through segment/contours/pitch
+    (``fast``: one pass of the network, ``chain.photo_input``)."""
     if not path.exists():
         raise InputError(f"{path}: file not found")
     if path.suffix.lower() in PITCH_SUFFIXES:
@@ -65,7 +66,7 @@ def _pitch_results(path: Path, expected: int):
 
     # One blade short is kept (blade_azimuths completes the rotor); any other count gets pitch's
     # own treatment: trimmed to the rotor's blades where that is clear, else refused.
-    found = photo_to_pitch(path, expected, one_short_ok=True)
+    found = photo_to_pitch(path, expected, one_short_ok=True, fast=fast)
     if found.error is not None:
         raise PerceptionError(found.error)
     res = found.result
@@ -149,14 +150,15 @@ def combine_azimuths(sets: list[list[float]], names: list[str], where: str) -> l
     return [float(a % 360.0) for a in mean]
 
 
-def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None = None
-                   ) -> tuple[dict[str, list[float]], dict[str, str]]:
+def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None = None,
+                   fast: bool = False) -> tuple[dict[str, list[float]], dict[str, str]]:
     """Rotor azimuths per turbine from the given inputs and the turbines' ``photo`` keys.
 
     Several images of one turbine (several photos, or a pitch file with several images) are
     combined: each is back-projected on its own, checked, and the blade angles averaged
     (``combine_azimuths``). Returns (azimuths, where they came from). Turbines without any photo
-    keep their YAML angles (not in the result)."""
+    keep their YAML angles (not in the result). ``fast``: photos get one pass of the network
+    (``chain.photo_input``)."""
     ids = {t.id for t in mission.turbines}
     todo: list[tuple[str | None, Path]] = [_parse(a, ids) for a in inputs]
     named = {tid for tid, _ in todo if tid}
@@ -170,7 +172,7 @@ def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None 
     notes: dict[str, list[str]] = {}
     for tid, path in todo:
         expected = mission.turbine(tid).n_blades if tid else mission.turbines[0].n_blades
-        for res, image_name in _pitch_results(path, expected):
+        for res, image_name in _pitch_results(path, expected, fast):
             owner = _owner(mission, tid, path, image_name)
             t = mission.turbine(owner)
             name = f"{path}" if not image_name or Path(str(image_name)).name == path.name \
