@@ -151,3 +151,22 @@ def test_a_slower_camera_makes_a_longer_flight_and_more_capture_time(swapped_pla
     assert slow.summary["capture"]["limits"]["photo_interval_m_s"] < 1.0
     assert b1["capture_s"] > 2 * b0["capture_s"]
     assert slow.summary["photos"] == plan.summary["photos"]  # the same photos, flown slower
+
+
+def test_nacelle_underside_is_flown_looking_up_where_the_gimbal_reaches():
+    from wtcli.plan.clearance import Site
+    from wtcli.plan.mission import default_launch
+    from wtcli.plan.paths import nacelle_chunk
+
+    t = Turbine.with_rotor_azimuth(75, id="T1", base=(0, 0, 0), hub_height=100,
+                                   rotor_diameter=150, yaw_deg=200)
+    pp = pass_params(Mission((t,), CAM))[0]
+    site = Site([t], launch=default_launch(t))
+    up = [w for w in nacelle_chunk(t, site, pp).wps if w.photo and w.fwd[2] > 0.99]
+    assert len(up) >= 2 and all(w.pos[2] < t.nacelle_center[2] for w in up)
+    assert site.clearance(np.array([w.pos for w in up])).min() >= pp.required
+    # over the tower top no station keeps the clearance: the pass is split round it
+    axis_dist = np.linalg.norm(np.array([w.pos[:2] for w in up]) - t.base_xyz[:2], axis=1)
+    assert axis_dist.min() > t.tower_top_radius + pp.required
+    under_slung = replace(pp, pitch_range=(-90.0, 30.0))
+    assert not [w for w in nacelle_chunk(t, site, under_slung).wps if w.photo and w.fwd[2] > 0.5]

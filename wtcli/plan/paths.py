@@ -18,7 +18,8 @@ that sees past what blocks the passes, chosen by greedy set cover among viewpoin
 clearance, and flown where they lengthen the blade's trajectory least.
 
 Tower and nacelle (fixed, the paper's "determined in advance"): vertical photo columns around the
-tower, flown up and down in turn; a loop along both sides, the rear and the top of the nacelle.
+tower, flown up and down in turn; a loop along both sides, the rear, the top and the underside
+of the nacelle.
 Stations that would come closer than the required clearance to any part are dropped.
 
 Every waypoint keeps ``required`` clearance (safe distance + tracking margin) from every part of
@@ -581,6 +582,7 @@ def _back_off(site: Site, pp: PassParams, pos: np.ndarray, fwd: np.ndarray) -> n
 
 
 def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams) -> Chunk:
+    """The nacelle's left side, rear face, right side, top and underside, one pass each."""
     chunk = Chunk(turbine.id, "nacelle")
     a = turbine.axis
     side = np.cross(Z, a)
@@ -599,11 +601,19 @@ def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams) -> Chunk:
             passes.append((f"{turbine.id}/nacelle", (ctr - a * (half[0] + pp.standoff))[None], a[None]))
     top = ctr + Z * (half[2] + pp.standoff) + along[::-1][:, None] * a  # rear -> front ... then back
     passes.append((f"{turbine.id}/nacelle", top[::-1], np.tile(-Z, (m, 1))))
+    # The underside, rear -> front, looking up: the stations over the tower top are dropped (too
+    # close to it), those ahead of and behind it kept where the gimbal reaches straight up.
+    bottom = ctr - Z * (half[2] + pp.standoff) + along[::-1][:, None] * a
+    passes.append((f"{turbine.id}/nacelle", bottom, np.tile(Z, (m, 1))))
     for i, (comp, pos, fwd) in enumerate(passes):
         if i == 2:
             pos, fwd = pos[::-1], fwd[::-1]  # right side rear -> front
         pos = _back_off(site, pp, pos, fwd)
         keep = _filter_stations(site, pp, pos, fwd)
+        if i == len(passes) - 1 and keep.sum() < 2:  # a lone underside photo: not worth the detour
+            chunk.notes.append(f"{comp}: underside: {int(keep.sum())} station(s) clear of the tower "
+                               "top and within the gimbal's reach: not flown")
+            continue
         if (~keep).any():
             aimless = int((~pp.aim_ok(fwd)).sum())
             chunk.notes.append(f"{comp}: {int((~keep).sum())} station(s) too close to a part"
