@@ -12,8 +12,9 @@ import pytest
 from wtcli.errors import ConfigError
 from wtcli.geometry import Camera, Turbine
 from wtcli.plan.config import Capture, Fleet, Mission, Settings, default_dict, mission_from_dict
-from wtcli.plan.mission import (BUDGET_KEYS, Speeds, _photo_waits, capture_speed, chunk_time,
-                                leg_speeds, pass_params, plan_mission)
+from wtcli.plan.mission import (ACCEL_M_S2, BUDGET_KEYS, Speeds, _flown, _flown_leg_times,
+                                _photo_waits, capture_speed, chunk_time, leg_speeds, pass_params,
+                                plan_mission)
 from wtcli.plan.paths import WP, Chunk
 
 CAM = Camera(5456, 3632, 16, 23.2)
@@ -62,8 +63,20 @@ def test_photo_waits_keep_the_camera_interval():
 def test_chunk_time_counts_the_photo_interval_waits():
     # what the battery decisions rest on: photos 0.5 m apart at 2.5 m/s (0.2 s) wait for 0.7 s
     ch = Chunk("T1", "blade1", [_wp(0.5 * k, True, standoff=5.0) for k in range(11)])
-    assert chunk_time(ch, SP) == pytest.approx(10 * 0.2)
-    assert chunk_time(ch, replace(SP, interval=0.7)) == pytest.approx(10 * 0.7)
+    flown = chunk_time(ch, SP)  # 5 m at 2.5 m/s from and to a stop: 2 + 2.5 / 2.5 s
+    assert flown == pytest.approx(5.0 / 2.5 + 2.5 / ACCEL_M_S2)
+    assert chunk_time(ch, replace(SP, interval=0.7)) == pytest.approx(10 * 0.7)  # every leg < 0.7 s
+
+
+def test_flown_leg_times_pay_for_speed_changes_and_corners():
+    line = np.array([[0.0, 0, 50], [50, 0, 50], [100, 0, 50]])
+    t = _flown_leg_times(line, np.array([5.0, 5.0]), 3.0)
+    assert t.sum() == pytest.approx(100 / 5 + 5 / ACCEL_M_S2)  # straight on: no corner cost
+    corner = np.array([[0.0, 0, 50], [50, 0, 50], [50, 50, 50]])
+    assert _flown_leg_times(corner, np.array([5.0, 5.0]), 3.0).sum() > t.sum() + 1.0
+    # a vertical climb at the climb rate, from and to a stop
+    assert _flown(np.array([[0.0, 0, 0], [0, 0, 10]]), 8.0, 3.0) == pytest.approx(
+        10 / 3 + 3 / ACCEL_M_S2)
 
 
 def test_capture_speed_is_the_slowest_of_cap_interval_and_blur():
@@ -115,8 +128,10 @@ def test_time_budget_adds_up_to_the_flight_and_names_every_kind(swapped_plan):
     assert r.summary["battery_swaps"] >= 1
     assert b["battery_swaps_s"] == pytest.approx(120.0 * r.summary["battery_swaps"])
     sorties = r.summary["sorties"]
-    # take-off climb and landing descent: takeoff_altitude_m at climb_rate_m_s, each sortie
-    assert b["climbs_s"] == pytest.approx(2 * sorties * 10.0 / 3.0, abs=0.05)
+    # take-off climb and landing descent: takeoff_altitude_m at climb_rate_m_s, each sortie,
+    # from a stop on the ground, through the corner above the launch point
+    up = _flown(np.array([[0.0, 0, 0], [0, 0, 10]]), 8.0, 3.0)
+    assert 2 * sorties * 10 / 3 < b["climbs_s"] <= 2 * sorties * up + 0.05
     assert b["capture_s"] > b["turns_s"] > 0 and b["transit_s"] > 0
     assert s["per_uav"]["UAV1"]["time_budget"] == s["time_budget"]
 
@@ -170,3 +185,15 @@ def test_nacelle_underside_is_flown_looking_up_where_the_gimbal_reaches():
     assert axis_dist.min() > t.tower_top_radius + pp.required
     under_slung = replace(pp, pitch_range=(-90.0, 30.0))
     assert not [w for w in nacelle_chunk(t, site, under_slung).wps if w.photo and w.fwd[2] > 0.5]
+
+
+def test_an_autopilot_flies_the_plan_in_about_the_planned_time(swapped_plan):
+    """fly's set-point (trapezoidal speed changes, junction-deviation corners) on the plan's
+    route: the plan's times already pay for the corners, so it runs only a little behind."""
+    from wtcli.fly.sim import make_reference
+
+    _, plan = swapped_plan
+    r = plan.routes[0]
+    ref = make_reference(r.t, r.pos, r.yaw_deg, r.gimbal_pitch_deg, 0.1, 0.0, ACCEL_M_S2, 0.05,
+                         r.speed)
+    assert r.duration_s <= ref.t[-1] <= 1.08 * r.duration_s

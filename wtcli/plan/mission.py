@@ -221,23 +221,56 @@ def _unit(v: np.ndarray) -> np.ndarray:
 
 
 # ---- timing ------------------------------------------------------------------------------------------
-def _leg_time(p: np.ndarray, q: np.ndarray, v: float, climb: float) -> float:
-    d = float(np.linalg.norm(q - p))
-    return max(d / v, abs(float(q[2] - p[2])) / climb) if d > 0 else 0.0
+# How an autopilot's mission mode flies a polyline (fly's reference, docs/fly.md): speed changes
+# at this acceleration, corners at the "junction deviation" speed for this deviation.
+ACCEL_M_S2 = 2.5
+CORNER_M = 0.05
 
 
-def _leg_times(P: np.ndarray, v: float | np.ndarray, climb: float) -> np.ndarray:
-    """``_leg_time`` of each leg P[i] -> P[i + 1] at speed v (one per leg, or one for all)."""
+def _flown_leg_times(P: np.ndarray, v: np.ndarray, climb: float) -> np.ndarray:
+    """Each leg's time as flown: at its speed ``v`` (and the climb rate), slowing to the corner
+    speed at each turn and to a stop at the ends and zero-length legs, speed changes at
+    ACCEL_M_S2 (trapezoids)."""
     D = np.diff(P, axis=0)
-    d = np.linalg.norm(D, axis=1)
-    return np.where(d > 0, np.maximum(d / v, np.abs(D[:, 2]) / climb), 0.0)
+    L = np.linalg.norm(D, axis=1)
+    moving = L > 1e-6
+    dz = np.abs(D[:, 2])
+    ve = np.where(moving, np.minimum(v, np.divide(climb * L, dz, out=np.full(len(L), np.inf),
+                                                   where=dz > 1e-9)), 0.0)
+    m, a = len(P), ACCEL_M_S2
+    vc = np.zeros(m)
+    if m >= 3:
+        u = D / np.maximum(L, 1e-12)[:, None]
+        sh = np.sqrt((1 - np.clip(-(u[:-1] * u[1:]).sum(1), -1.0, 1.0)) / 2)  # sin(q/2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lim = np.where(sh > 0.9999, np.inf,
+                           np.sqrt(a * CORNER_M * sh / np.maximum(1 - sh, 1e-9)))
+        vc[1:-1] = np.where(moving[:-1] & moving[1:], np.minimum(np.minimum(ve[:-1], ve[1:]), lim),
+                            0.0)
+    for j in range(len(L)):  # reachable with |acceleration| <= a
+        vc[j + 1] = min(vc[j + 1], math.sqrt(vc[j] ** 2 + 2 * a * L[j]))
+    for j in range(len(L) - 1, -1, -1):
+        vc[j] = min(vc[j], math.sqrt(vc[j + 1] ** 2 + 2 * a * L[j]))
+    v0, v1 = vc[:-1], vc[1:]
+    vm = np.maximum(ve, np.maximum(v0, v1))
+    d_acc = (vm ** 2 - v0 ** 2) / (2 * a) + (vm ** 2 - v1 ** 2) / (2 * a)
+    full = d_acc <= L
+    vp = np.sqrt(np.maximum((2 * a * L + v0 ** 2 + v1 ** 2) / 2, 0.0))  # peak of a triangle
+    t_full = (vm - v0) / a + (vm - v1) / a + (L - d_acc) / np.maximum(vm, 1e-9)
+    t_tri = (vp - v0) / a + (vp - v1) / a
+    return np.where(moving, np.where(full, t_full, t_tri), 0.0)
+
+
+def _flown(P: np.ndarray, v: float, climb: float) -> float:
+    """``_flown_leg_times`` of a polyline at one speed, summed (from and to a stop)."""
+    return float(_flown_leg_times(P, np.full(len(P) - 1, v), climb).sum())
 
 
 def chunk_time(ch: Chunk, sp: Speeds) -> float:
     """Flight time of a chunk's legs at ``leg_speeds``, with the photo-interval waits."""
     if len(ch.wps) < 2:
         return 0.0
-    dt = _leg_times(np.array([w.pos for w in ch.wps]), leg_speeds(ch.wps, sp), sp.climb)
+    dt = _flown_leg_times(np.array([w.pos for w in ch.wps]), leg_speeds(ch.wps, sp), sp.climb)
     waits = _photo_waits(dt, np.array([w.photo for w in ch.wps]), sp.interval)
     return float(dt.sum() + waits.sum())
 
@@ -343,9 +376,9 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
         """Cruise time of a transit leg, along its via points once connected."""
         vias = links.get((p.tobytes(), q.tobytes())) if links is not None else None
         if not vias:
-            return _leg_time(p, q, v_fast, climb)
+            return _flown(np.vstack([p, q]), v_fast, climb)
         P = np.vstack([p[None], np.asarray(vias, float).reshape(-1, 3), q[None]])
-        return float(_leg_times(P, v_fast, climb).sum())
+        return _flown(P, v_fast, climb)
 
     def takeoff() -> None:
         wps.append(WP(above.copy(), None, False, "launch", False))
@@ -356,13 +389,13 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
         wps.append(WP(launch.copy(), None, False, "return", False))
 
     takeoff()
-    sortie = _leg_time(launch, above, v_fast, climb)
+    sortie = _flown(np.vstack([launch, above]), v_fast, climb)
     for i, ch in enumerate(chunks):
         t_ch = times[i] if times is not None else chunk_time(ch, sp)
         t_to = leg_s(wps[-1].pos, ch.start)
         t_back = leg_s(ch.end, above) + s.takeoff_altitude_m / climb
         if sortie + t_to + t_ch + t_back > usable:
-            fresh = _leg_time(launch, above, v_fast, climb) + leg_s(above, ch.start)
+            fresh = _flown(np.vstack([launch, above]), v_fast, climb) + leg_s(above, ch.start)
             if fresh + t_ch + t_back > usable:
                 raise PlanError(
                     f"{ch.turbine} {ch.name} takes {(fresh + t_ch + t_back) / 60:.1f} min from "
@@ -374,7 +407,7 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
                 wps.append(WP(launch.copy(), None, False, "launch", False))  # battery swap
                 swaps.append(len(wps) - 1)
                 takeoff()
-                sortie = _leg_time(launch, above, v_fast, climb)
+                sortie = _flown(np.vstack([launch, above]), v_fast, climb)
             t_to = leg_s(wps[-1].pos, ch.start)
         prev = wps[-1].pos
         wps.extend(link(prev, ch.start, "transit", True, f"to {ch.turbine} {ch.name}"))
@@ -396,7 +429,8 @@ def _timed_route(uav: str, wps: list[WP], swaps: list[int], sp: Speeds, swap_s: 
     The route's summary carries its ``time_budget`` per turbine id in ``turbines``."""
     n = len(wps)
     pos = np.array([w.pos for w in wps])
-    dt = _leg_times(pos, leg_speeds(wps, sp), sp.climb)
+    v = leg_speeds(wps, sp)
+    dt = _flown_leg_times(pos, v, sp.climb)
     L = np.linalg.norm(np.diff(pos, axis=0), axis=1)
     extra = np.zeros(n - 1)
     extra[[i - 1 for i in swaps]] = swap_s
