@@ -12,7 +12,7 @@ from wtcli.errors import ConfigError
 from wtcli.fly import rigid
 from wtcli.fly.flight import fly_plan
 from wtcli.fly.navigation import ERROR_MODEL, gauss_markov, make_navigation, tower_shadow
-from wtcli.fly.scenario import default_scenario
+from wtcli.fly.scenario import default_scenario, load_scenario, shipped_scenarios
 from wtcli.fly.wake import STROUHAL, wake_series
 from wtcli.fly.wind import IEC_IREF, kaimal_params, kaimal_series
 from tests.test_fly import blade_pass_plan, line_plan, turbine
@@ -47,6 +47,26 @@ def test_kaimal_series_has_the_model_variance_and_follows_the_height():
     # Deterministic in the seed.
     again, _ = kaimal_series(w, h, dt, np.random.default_rng(1))
     assert np.array_equal(climb, again)
+
+
+def test_complex_terrain_turbulence_structure_raises_lateral_and_vertical_sigma():
+    """IEC 61400-1's complex-terrain structure (sigma_2 / sigma_1 = 1.0, sigma_3 / sigma_1 = 0.7)
+    is what paper-s2 flies; the ratios are checked like every other key."""
+    base = {"speed_ms": 10, "reference_height_m": 100, "shear_exponent": 0.0}
+    w = default_scenario(wind={**base, "turbulence": {"model": "kaimal", "iec_class": "A",
+                                                      "lateral_ratio": 1.0,
+                                                      "vertical_ratio": 0.7}}).wind
+    p = kaimal_params(w, 100.0)
+    assert p.sigma_u == pytest.approx(0.16 * (0.75 * 10 + 5.6))
+    assert (p.sigma_v, p.sigma_w) == pytest.approx((p.sigma_u, 0.7 * p.sigma_u))
+    n, dt = 2 ** 17, 0.05
+    series, _ = kaimal_series(w, np.full(n, 100.0), dt, np.random.default_rng(2))
+    np.testing.assert_allclose(series.std(0), [p.sigma_u, p.sigma_v, p.sigma_w], rtol=0.15)
+    s2 = load_scenario(shipped_scenarios()["paper-s2"]).wind
+    assert (s2.turbulence_class, s2.lateral_ratio, s2.vertical_ratio) == ("A", 1.0, 0.7)
+    assert s2.gust_rate_per_min == 0  # the Kaimal field holds normal turbulence's gusts
+    with pytest.raises(ConfigError, match=r"wind.turbulence.lateral_ratio: expected a number"):
+        default_scenario(wind={"turbulence": {"lateral_ratio": 3}})
 
 
 def test_scenario_refuses_an_unknown_turbulence_class():

@@ -35,6 +35,10 @@ class Wind:
     gust_amplitude_ms: float
     gust_duration_s: float
     turbulence_class: str = "B"  # IEC 61400-1 category (Kaimal): A+, A, B, C
+    # Kaimal: sigma_2 / sigma_1 and sigma_3 / sigma_1 (IEC 61400-1 NTM 0.8 / 0.5; complex
+    # terrain has more lateral and vertical turbulence, docs/scenarios.md)
+    lateral_ratio: float = 0.8
+    vertical_ratio: float = 0.5
     wake: bool = True  # tower and nacelle wake (wtcli.fly.wake)
 
 
@@ -266,7 +270,10 @@ def scenario_from_dict(d: Any, where: str = "scenario", base_dir: Path | None = 
                 gust_rate_per_min=number(gust, "rate_per_min", f"{w}wind.gusts", lo=0, hi=30),
                 gust_amplitude_ms=number(gust, "amplitude_ms", f"{w}wind.gusts", lo=0, hi=20),
                 gust_duration_s=number(gust, "duration_s", f"{w}wind.gusts", lo=0.2, hi=60),
-                turbulence_class=iec, wake=_bool(m["wind"], "wake", f"{w}wind"))
+                turbulence_class=iec, wake=_bool(m["wind"], "wake", f"{w}wind"),
+                lateral_ratio=number(turb, "lateral_ratio", f"{w}wind.turbulence", lo=0.3, hi=1.5),
+                vertical_ratio=number(turb, "vertical_ratio", f"{w}wind.turbulence", lo=0.2,
+                                      hi=1.2))
 
     kind = choice(m["terrain"], "kind", f"{w}terrain", ("flat", "hilly"))
     tf = number(m["terrain"], "turbulence_factor", f"{w}terrain", lo=0, hi=5, default=None)

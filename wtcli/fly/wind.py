@@ -137,7 +137,8 @@ KAIMAL_BAND_M = 10.0  # heights at which the spectrum is evaluated (interpolated
 @dataclass(frozen=True)
 class KaimalParams:
     """IEC 61400-1 normal turbulence model at one height: sigma_1 = I_ref (0.75 V + 5.6), the
-    lateral and vertical 0.8 and 0.5 of it; Kaimal scales L = 8.1, 2.7, 0.66 Lambda_1 with
+    lateral and vertical ``lateral_ratio`` and ``vertical_ratio`` of it (0.8 and 0.5 in the
+    standard's Kaimal model; larger in complex terrain); Kaimal scales L = 8.1, 2.7, 0.66 Lambda_1 with
     Lambda_1 = 0.7 z below 60 m, 42 m above."""
 
     height_m: float
@@ -167,7 +168,7 @@ def kaimal_params(wind: Wind, height_agl_m: float, turbulence_factor: float = 1.
     else:
         s1 = IEC_IREF[wind.turbulence_class] * (0.75 * V + 5.6) if V > 0 else 0.0
     s1 *= turbulence_factor
-    return KaimalParams(z, s1, 0.8 * s1, 0.5 * s1, 8.1 * lam, 2.7 * lam, 0.66 * lam, max(V, 1.0))
+    return KaimalParams(z, s1, wind.lateral_ratio * s1, wind.vertical_ratio * s1, 8.1 * lam, 2.7 * lam, 0.66 * lam, max(V, 1.0))
 
 
 def kaimal_psd(L: float, V: float):
