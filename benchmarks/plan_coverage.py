@@ -6,7 +6,8 @@
 Random turbines: rotor azimuth 0-120 deg, yaw 0-360 deg, rotor diameter 90/120/150 m, hub height
 R + 15..45 m; default mission settings (safe distance 3 m + 1 m tracking margin, 1.5 mm/px) with
 ``min_side_coverage: 0`` so that no plan is refused for coverage. Coverage is the planner's own
-prediction (``summary.predicted_coverage``, the one coverage measure). ``--gimbal-max``: the
+prediction (``summary.predicted_coverage``: the one coverage measure on the converged sampling,
+``turbine_coverage``, blade cells refined where covered and missed meet). ``--gimbal-max``: the
 gimbal's upward pitch limit (default 90: it looks straight up; an under-slung gimbal stops near 30).
 
 ``--why`` explains every missed blade sample with one reason, the first that applies:
@@ -42,7 +43,7 @@ from wtcli.errors import PlanError  # noqa: E402
 from wtcli.geometry import BLADE_SIDES, Camera, Turbine  # noqa: E402
 from wtcli.plan.config import Fleet, Mission, Settings  # noqa: E402
 from wtcli.plan.mission import _photos_of, pass_params, plan_mission  # noqa: E402
-from wtcli.geometry.coverage import measure_coverage  # noqa: E402
+from wtcli.geometry.coverage import turbine_coverage  # noqa: E402
 from wtcli.plan.clearance import Site  # noqa: E402
 
 CAM = Camera(5456, 3632, 16, 23.2)
@@ -137,8 +138,9 @@ def run(cases: int, seed: int, why: bool, spacing: float = Settings().coverage_s
             pp, gsd, _ = pass_params(m)
             st = m.settings
             pos, rot = _photos_of(t, plan.routes)
-            smp = t.surface_samples(st.coverage_spacing_m, "blades")
-            cv = measure_coverage(smp, CAM, pos, rot, gsd, st.max_incidence_deg)
+            cv = turbine_coverage(t, CAM, pos, rot, gsd, st.coverage_spacing_m,
+                                  st.max_incidence_deg, "blades")
+            smp = cv.samples
             missed = np.nonzero(~cv.covered)[0]
             rs = why_missed(t, Site([t]), smp, missed, pp.required, pp.min_standoff,
                             CAM.distance_for_gsd(gsd * 1.05), st.max_incidence_deg, st.min_altitude_m,

@@ -457,8 +457,9 @@ class Turbine:
 
     def blade_grid(self, k: int, spacing: float) -> tuple[int, int, float, float]:
         """(rows, per_side, s_start, s_end): how blade k's surface is cut into sample cells at
-        ``spacing``. ``rows`` span cells of equal length between ``s_start`` and ``s_end`` (m from
-        the hub centre: from where the blade leaves the hub sphere to the tip) and ``per_side``
+        ``spacing``. ``rows`` span cells of equal length, at most ``_ROW_SPACING`` * spacing,
+        between ``s_start`` and ``s_end`` (m from the hub centre: from where the blade leaves the
+        hub sphere to the tip) and ``per_side``
         cells of equal arc length round each of the four sides of every section (the longest
         side's arc at ``spacing``, odd, at least ``_SIDE_SAMPLES_MIN``); columns run round the
         section side after side (``BLADE_SIDES`` order). At refinement level l each cell is cut
@@ -467,7 +468,7 @@ class Turbine:
         if key not in self._cache:
             s0, s1 = self.blade_root_offset, self.tip_radius
             s_start = max(s0, math.sqrt(max(self.hub_radius ** 2 - (self.blade_root_chord / 2) ** 2, 0)))
-            rows = max(2, int(math.ceil((s1 - s_start) / spacing)))
+            rows = max(2, int(math.ceil((s1 - s_start) / (spacing * _ROW_SPACING))))
             f = (s_start + (np.arange(rows) + 0.5) * (s1 - s_start) / rows - s0) / (s1 - s0)
             A, B = self.blade_semi_axes(f)
             longest = float((A[:, None] * _side_tables(B / A)[2]).max())
@@ -764,7 +765,10 @@ def _ellipse_distance(u: np.ndarray, v: np.ndarray, A: np.ndarray, B: np.ndarray
 
 
 _SIDE_SAMPLES_MIN = 9  # cells round each side of a section at least, odd (its middle line sampled)
-_SIDE_TABLE = 256  # steps of the arc-length table of each side
+_ROW_SPACING = 0.5  # span cells this fraction of the spacing long (frame edges and the gaps
+# between neighbouring views cross the span: at the full spacing a gap of a few dm between two
+# views fell between rows, 0.6 points of a trailing edge)
+_SIDE_TABLE = 64  # steps of the arc-length table of each side (arc within 0.1 %)
 
 
 def _side_tables(ratio: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -28,7 +28,7 @@ import numpy as np
 from wtcli.console import StageProgress, stage_ticker
 from wtcli.errors import ConfigError, PlanError
 from wtcli.geometry import Camera, Turbine
-from wtcli.geometry.coverage import Coverage, measure_coverage
+from wtcli.geometry.coverage import Coverage, turbine_coverage
 from wtcli.plan.config import Mission
 from wtcli.plan.paths import (WP, Chunk, PassParams, _Blocked, add_gap_views, blade_chunk,
                               connect, gap_plan, nacelle_chunk, tower_chunk)
@@ -41,6 +41,7 @@ PATTERNS = ("adaptive", "fixed-y")
 GSD_FILL = 0.9  # nominal standoff = this fraction of the distance that gives the target GSD
 MAX_LEG_ROUNDS = 8  # dry runs of the routes at most (each connects the legs the last one named)
 SPLIT_BELOW = 0.985  # a single-pass flat side below this predicted coverage is flown split
+GAP_ROUNDS = 2  # further rounds of gap views for a side still below min_side_coverage
 Z = np.array([0.0, 0.0, 1.0])
 
 
@@ -571,20 +572,19 @@ def check_routes(routes: list[Route], site: Site, launch: np.ndarray, safe: floa
 
 
 def predict_coverage(t: Turbine, routes: list[Route], camera: Camera, gsd_mm: float,
-                     spacing: float, max_incidence: float):
+                     spacing: float, max_incidence: float) -> Coverage:
+    """The plan's photos of ``t`` measured on its converged sampling (``turbine_coverage``)."""
     pos, rot = _photos_of(t, routes)
-    samples = t.surface_samples(spacing)
-    return measure_coverage(samples, camera, pos,
-                            np.array(rot).reshape(-1, 3, 3), gsd_mm, max_incidence)
+    return turbine_coverage(t, camera, pos, np.array(rot).reshape(-1, 3, 3), gsd_mm, spacing,
+                            max_incidence)
 
 
 def _blade_coverage_from_chunks(t: Turbine, chunks: list[Chunk], camera: Camera, gsd_mm: float,
-                                spacing: float, max_incidence: float):
+                                spacing: float, max_incidence: float) -> Coverage:
     pos = np.array([w.pos for c in chunks for w in c.wps if w.photo]).reshape(-1, 3)
     rot = np.array([_rotation(*(round(v, 6) for v in _yaw_pitch(w.fwd)))
                     for c in chunks for w in c.wps if w.photo]).reshape(-1, 3, 3)
-    return measure_coverage(t.surface_samples(spacing, "blades"), camera, pos, rot, gsd_mm,
-                            max_incidence)
+    return turbine_coverage(t, camera, pos, rot, gsd_mm, spacing, max_incidence, "blades")
 
 
 # ---- per-turbine work (run in worker processes for large sites) ----------------------------------------
@@ -634,6 +634,20 @@ def _chunks(job: tuple) -> list[Chunk]:
             views.update(gap_plan(t, cov.samples, cov.covered, site, pp, s.max_incidence_deg,
                                   reach, set(split))[0])
         add_gap_views(chunks, views, site, pp)
+        # The views were chosen on what the passes missed; checked on the converged figure,
+        # a side still below min_side_coverage gets views for what is left, round by round.
+        for _ in range(GAP_ROUNDS):
+            cov = _blade_coverage_from_chunks(t, chunks, mission.camera, gsd_eval,
+                                              s.coverage_spacing_m, s.max_incidence_deg)
+            short = {int(b[5:]) - 1 for b, sides in cov.by_blade_side().items()
+                     if min(sides.values()) < s.min_side_coverage}
+            if not short:
+                break
+            more = gap_plan(t, cov.samples, cov.covered, site, pp, s.max_incidence_deg, reach,
+                            short)[0]
+            if not any(more.values()):
+                break
+            add_gap_views(chunks, more, site, pp)
     return chunks
 
 
@@ -662,7 +676,7 @@ def _photos_by_turbine(ids: list[str], routes: list[Route]) -> dict[str, tuple[n
 
 def _side_coverage(job: tuple) -> tuple[dict, float, float]:
     t, (pos, rot), camera, gsd, spacing, incidence = job
-    cov = measure_coverage(t.surface_samples(spacing), camera, pos, rot, gsd, incidence)
+    cov = turbine_coverage(t, camera, pos, rot, gsd, spacing, incidence)
     return cov.by_blade_side(), cov.blade_average(), cov.structure_fraction()
 
 
@@ -816,7 +830,7 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
                     f" with {pp.required:g} m clearance (safe distance + tracking margin)"
                 fix = "turn the rotor"
             raise PlanError(f"turbine {t.id} {worst[0]} {worst[1]}: predicted coverage "
-                            f"{worst[2]:.1%} < min_side_coverage {s.min_side_coverage:.0%} at "
+                            f"{worst[2]:.1%} < min_side_coverage {100 * s.min_side_coverage:.4g}% at "
                             f"{gsd_eval:.2f} mm/px{why}; {fix}, or lower min_side_coverage to "
                             "accept it")
 

@@ -729,6 +729,8 @@ GAP_BORDER = 0.05  # frame margin the candidates keep (coverage itself uses 0.02
 GAP_FINE_GRID = ((2.0, 6.0, 12),)
 GAP_FINE_CANDIDATES = 24000
 GAP_FINE_SAMPLES = 8  # at most this many samples searched one by one, per blade
+GAP_SPAN_BINS = 8  # what the grids leave is searched again in this many stretches of the span
+GAP_POINTS = 400  # missed samples of a blade the search is asked about at most
 
 
 def gap_views(turbine: Turbine, pts: np.ndarray, nrm: np.ndarray, area: np.ndarray,
@@ -865,6 +867,13 @@ def gap_plan(turbine: Turbine, samples: SurfaceSamples, covered: np.ndarray, sit
         if (blades is not None and k not in blades) or len(idx) == 0:
             continue
         out[k] = []
+        # The search's cost grows with the samples it is asked about: of many, an even spread
+        # along the span stands for the rest (each for its share of the area); what the views
+        # found see of the rest is marked afterwards.
+        everything = idx
+        if len(idx) > GAP_POINTS:
+            idx = idx[np.argsort(samples.span[idx], kind="stable")]
+            idx = np.unique(idx[np.linspace(0, len(idx) - 1, GAP_POINTS).round().astype(int)])
         # A second round searches what the first left, on the finer grid fewer samples allow.
         for _ in range(2):
             views = gap_views(turbine, samples.points[idx], samples.normals[idx],
@@ -879,6 +888,24 @@ def gap_plan(turbine: Turbine, samples: SurfaceSamples, covered: np.ndarray, sit
             idx = idx[~covered[idx]]
             if not views or len(idx) == 0 or len(out[k]) >= GAP_MAX_VIEWS:
                 break
+        # A strip along the span (a thin edge seen only near the incidence limit) needs a view
+        # every few metres, which a search over all it misses steps over: what is left, span
+        # bin by span bin, each on the finer grid its fewer samples allow.
+        if len(idx) > GAP_FINE_SAMPLES:
+            bins = np.minimum((samples.span[idx] * GAP_SPAN_BINS).astype(int), GAP_SPAN_BINS - 1)
+            for b in np.unique(bins):
+                sel = idx[(bins == b) & ~covered[idx]]
+                if len(sel) == 0 or len(out[k]) >= GAP_MAX_VIEWS:
+                    continue
+                for pos, fwd, got in gap_views(turbine, samples.points[sel], samples.normals[sel],
+                                               samples.area[sel], site, pp, max_incidence_deg,
+                                               max_distance, 1):
+                    side_area = np.bincount(samples.side[sel][got], samples.area[sel][got],
+                                            len(BLADE_SIDES))
+                    out[k].append((pos, fwd, f"{turbine.id}/blade{k + 1}/"
+                                   f"{BLADE_SIDES[int(np.argmax(side_area))]}"))
+                    covered[sel[got]] = True
+            idx = idx[~covered[idx]]
         # Then what is left, largest first, one sample at a time on the fine grid.
         for i in idx[np.argsort(-samples.area[idx], kind="stable")][:GAP_FINE_SAMPLES]:
             if covered[i] or len(out[k]) >= GAP_MAX_VIEWS:
@@ -890,6 +917,19 @@ def gap_plan(turbine: Turbine, samples: SurfaceSamples, covered: np.ndarray, sit
                 side = BLADE_SIDES[int(samples.side[i])]
                 out[k].append((pos, fwd, f"{turbine.id}/blade{k + 1}/{side}"))
                 covered[i] = True
+        rest = everything[~covered[everything]]
+        for pos, fwd, _ in out[k]:
+            if not len(rest):
+                break
+            right = np.cross(fwd, Z)
+            right /= max(float(np.linalg.norm(right)), 1e-9)
+            R = np.stack([right, np.cross(fwd, right), fwd])
+            seen = imaged(samples.points[rest] - pos, samples.normals[rest], R, pp.camera,
+                          max_distance, max_incidence_deg - 1.0, GAP_BORDER)
+            seen[seen] = turbine.line_of_sight(np.tile(pos, (int(seen.sum()), 1)),
+                                               samples.points[rest[seen]])
+            covered[rest[seen]] = True
+            rest = rest[~seen]
     return out, covered
 
 
