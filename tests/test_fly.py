@@ -292,7 +292,7 @@ def test_cli_needs_a_scenario(cli, tmp_path):
     res = cli("fly")
     assert res.exit_code == 2
     res = cli("fly", "--scenario", tmp_path / "missing.yaml")
-    assert res.exit_code == 4
+    assert res.exit_code == 3  # a missing input file (docs/exit-codes.md)
 
 
 @pytest.mark.slow

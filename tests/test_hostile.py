@@ -612,3 +612,114 @@ def test_hostile_pitch_json_given_to_plan(cli, pitch_file, tmp_path, case):
     line = one_error_line(cli("plan", SAMPLE / "turbines.yaml", f"T1={src}", "--out", out), 3, src)
     assert says in line, line
     assert not out.exists()
+
+
+# ---- input files: missing, unreadable, too large ---------------------------------------------
+def test_missing_or_unreadable_yaml_is_exit_3_its_content_exit_4(cli, tmp_path):
+    # docs/exit-codes.md: a file that cannot be read is an INPUT error (3), whatever its kind;
+    # CONFIG (4) is for what a readable YAML says
+    missing = tmp_path / "missing.yaml"
+    assert "file not found" in one_error_line(cli("plan", missing), 3, missing, alone=True)
+    assert "is a folder" in one_error_line(cli("plan", tmp_path), 3, tmp_path, alone=True)
+    one_error_line(cli("fly", "--scenario", missing), 3, missing, alone=True)
+    # a scenario naming a turbines.yaml that is not there: that file named, exit 3
+    scn = _yaml(tmp_path, "scn.yaml", f"mission: {tmp_path / 'gone.yaml'}\n")
+    one_error_line(cli("fly", "--scenario", scn), 3, tmp_path / "gone.yaml")
+    latin1 = tmp_path / "latin1.yaml"
+    latin1.write_bytes("mission:\n  name: caf\xe9\n".encode("latin-1"))
+    assert "not UTF-8" in one_error_line(cli("plan", latin1), 4, latin1)
+
+
+def test_unreadable_yaml_is_exit_3(cli, tmp_path, monkeypatch):
+    # (a permission error simulated: the tests may run as root, who reads any file)
+    import builtins
+
+    src = _yaml(tmp_path, "t.yaml", (SAMPLE / "turbines.yaml").read_text())
+    real_open = builtins.open
+
+    def deny(file, *a, **k):
+        if str(file) == str(src):
+            raise PermissionError(errno.EACCES, "Permission denied", str(file))
+        return real_open(file, *a, **k)
+
+    monkeypatch.setattr(builtins, "open", deny)
+    line = one_error_line(cli("plan", src, "--out", tmp_path / "p.json"), 3, src)
+    assert "cannot read (Permission denied)" in line
+    assert not (tmp_path / "p.json").exists()
+
+
+def _sparse(path: Path, size: int) -> Path:
+    """A file of ``size`` bytes taking no disk space (a hole): enough to test a size limit."""
+    with open(path, "wb") as f:
+        f.truncate(size)
+    return path
+
+
+@pytest.mark.parametrize("command", ["contours", "pitch", "fly", "plan"])
+def test_json_over_the_size_limit_is_refused_before_reading(cli, tmp_path, command):
+    from wtcli.jsonio import MAX_JSON_BYTES
+
+    big = _sparse(tmp_path / "big.json", 2_100_000_000)
+    assert MAX_JSON_BYTES < 2_100_000_000
+    args = {"contours": (big,), "pitch": (big,), "fly": (big, "--scenario", "tiny"),
+            "plan": (SAMPLE / "turbines.yaml", f"T1={big}")}[command]
+    t0 = time.monotonic()
+    line = one_error_line(cli(command, *args), 3, big)
+    assert "2.1 GB is over the 1 GB limit for a JSON input" in line, line
+    assert time.monotonic() - t0 < 20  # refused from the size, not after reading 2 GB
+
+
+def test_yaml_over_the_size_limit_is_refused(cli, tmp_path):
+    big = _sparse(tmp_path / "big.yaml", 20_000_000)
+    assert "20 MB is over the 16 MB limit for a YAML input" in one_error_line(cli("plan", big), 3, big)
+    scn = _sparse(tmp_path / "scn.yaml", 20_000_000)
+    one_error_line(cli("fly", "--scenario", scn), 3, scn)
+
+
+def test_a_pipe_is_read_only_up_to_the_limit(tmp_path, monkeypatch):
+    # a FIFO has no size to check first: reading stops one byte past the limit
+    from wtcli.errors import InputError
+    from wtcli.jsonio import read_json
+
+    with pytest.raises(InputError, match="more than 1 kB, the limit for a JSON input"):
+        read_json("/dev/zero", max_bytes=1000)
+
+
+# ---- image headers: every format segment and contours decode ----------------------------------
+def _tiff_bomb(path: Path, order: bytes = b"II", big: bool = False, kind: int = 4) -> Path:
+    """A TIFF whose first IFD claims ImageWidth x ImageLength = 60000 x 60000 (3.6 GP)."""
+    import struct
+
+    e = "<" if order == b"II" else ">"
+    if big:  # BigTIFF: 8-byte offsets, 20-byte entries
+        head = order + struct.pack(e + "HHHQ", 43, 8, 0, 16)
+        fmt = {3: "HHQH6x", 4: "HHQI4x", 16: "HHQQ"}[kind]
+        ifd = struct.pack(e + "Q", 2) + b"".join(struct.pack(e + fmt, tag, kind, 1, 60000)
+                                                for tag in (256, 257)) + bytes(8)
+    else:
+        head = order + struct.pack(e + "HI", 42, 8)
+        fmt = {3: "HHIH2x", 4: "HHII"}[kind]
+        ifd = struct.pack(e + "H", 2) + b"".join(struct.pack(e + fmt, tag, kind, 1, 60000)
+                                                for tag in (256, 257)) + bytes(4)
+    path.write_bytes(head + ifd + bytes(64))
+    return path
+
+
+def _bmp_bomb(path: Path) -> Path:
+    import struct
+
+    dib = struct.pack("<IiiHHIIiiII", 40, 50000, -50000, 1, 8, 0, 0, 0, 0, 0, 0)
+    path.write_bytes(b"BM" + struct.pack("<IHHI", 14 + 40 + 64, 0, 0, 54) + dib + bytes(64))
+    return path
+
+
+def test_tiff_and_bmp_headers_claiming_huge_images_are_refused(cli, weights, tmp_path):
+    tif = _tiff_bomb(tmp_path / "bomb.tif")
+    line = one_error_line(cli("segment", tif, "--out", tmp_path / "o", "--model", weights, *FAST),
+                          3, tif)
+    assert "60000x60000" in line and "200,000,000" in line, line
+    assert not (tmp_path / "o" / "instances.json").exists()
+    for mask in (_tiff_bomb(tmp_path / "mask.tiff", b"MM"), _bmp_bomb(tmp_path / "mask.bmp")):
+        line = one_error_line(cli("contours", mask, "--out", tmp_path / "c.json"), 3, mask)
+        assert "over the limit of 200,000,000" in line, line
+    assert not (tmp_path / "c.json").exists()

@@ -57,3 +57,67 @@ def test_bad_instances_files_are_clear(tmp_path):
         read_instances(p)
     with pytest.raises(ValueError, match="labels"):
         Instances(np.array(["rotor"], object), np.zeros((1, 2, 2), bool))
+
+
+def _as_array(b: bytes) -> np.ndarray:
+    return np.frombuffer(b, np.uint8)
+
+
+@pytest.mark.parametrize("ext", [".png", ".jpg", ".tif", ".bmp", ".webp"])
+def test_declared_size_of_files_opencv_writes(ext):
+    import cv2
+
+    from wtcli.masks import declared_size
+
+    ok, buf = cv2.imencode(ext, np.zeros((37, 53, 3), np.uint8))
+    assert ok and declared_size(buf) == (53, 37)
+
+
+def test_declared_size_of_crafted_tiff_bmp_webp_headers():
+    import struct
+
+    from wtcli.masks import declared_size
+
+    def tiff(e: str, order: bytes, kind: int, w: int, h: int, big: bool = False) -> bytes:
+        if big:
+            fmt = {3: "HHQH6x", 4: "HHQI4x", 16: "HHQQ"}[kind]
+            return (order + struct.pack(e + "HHHQQ", 43, 8, 0, 16, 2)
+                    + struct.pack(e + fmt, 256, kind, 1, w) + struct.pack(e + fmt, 257, kind, 1, h))
+        fmt = {3: "HHIH2x", 4: "HHII"}[kind]
+        return (order + struct.pack(e + "HIH", 42, 8, 2) + struct.pack(e + fmt, 256, kind, 1, w)
+                + struct.pack(e + fmt, 257, kind, 1, h))
+
+    assert declared_size(_as_array(tiff("<", b"II", 4, 70000, 50000))) == (70000, 50000)
+    assert declared_size(_as_array(tiff(">", b"MM", 4, 70000, 50000))) == (70000, 50000)
+    assert declared_size(_as_array(tiff(">", b"MM", 3, 65535, 40000))) == (65535, 40000)
+    assert declared_size(_as_array(tiff("<", b"II", 16, 10**6, 10**6, big=True))) == (10**6, 10**6)
+    assert declared_size(_as_array(tiff(">", b"MM", 3, 300, 200, big=True))) == (300, 200)
+    # an IFD offset past the end, or an IFD without the sizes: not told (the decoder decides)
+    assert declared_size(_as_array(b"II*\0" + struct.pack("<I", 10**6) + bytes(16))) is None
+    assert declared_size(_as_array(b"II*\0" + struct.pack("<IH", 8, 1)
+                                   + struct.pack("<HHII", 259, 3, 1, 1))) is None
+    # BMP: Windows header (negative height = top-down) and the OS/2 one with 16-bit sides
+    win = b"BM" + bytes(12) + struct.pack("<Iii", 40, 30000, -20000) + bytes(16)
+    assert declared_size(_as_array(win)) == (30000, 20000)
+    os2 = b"BM" + bytes(12) + struct.pack("<IHH", 12, 640, 480) + bytes(16)
+    assert declared_size(_as_array(os2)) == (640, 480)
+    # WebP: extended (24-bit canvas) and lossless (14-bit) headers
+    vp8x = b"RIFF" + bytes(4) + b"WEBPVP8X" + bytes(8) + (19999).to_bytes(3, "little") \
+        + (14999).to_bytes(3, "little") + bytes(4)
+    assert declared_size(_as_array(vp8x)) == (20000, 15000)
+    bits = (16383) | (16383 << 14)
+    vp8l = b"RIFF" + bytes(4) + b"WEBPVP8L" + bytes(4) + b"\x2f" + bits.to_bytes(4, "little") + bytes(8)
+    assert declared_size(_as_array(vp8l)) == (16384, 16384)
+
+
+def test_check_declared_size_refuses_a_huge_tiff(tmp_path):
+    import struct
+
+    from wtcli.masks import check_declared_size
+
+    b = b"II*\0" + struct.pack("<IH", 8, 2) + struct.pack("<HHII", 256, 4, 1, 20000) \
+        + struct.pack("<HHII", 257, 4, 1, 10001)
+    with pytest.raises(InputError, match=r"x\.tif: image too large.*20000x10001"):
+        check_declared_size(_as_array(b), tmp_path / "x.tif")
+    b = b.replace(struct.pack("<I", 10001), struct.pack("<I", 10000))  # exactly 200 MP: allowed
+    check_declared_size(_as_array(b), tmp_path / "x.tif")

@@ -22,6 +22,13 @@ from wtcli.errors import InputError, OutputError
 
 FLOAT_DIGITS = 6
 SHOWN_CHARS = 80  # the most characters of an input value an error message quotes
+# The largest input files read, checked from the size before reading (docs/exit-codes.md,
+# "Input sizes"). The largest JSON we write is a flight's instances file: about 145 kB per
+# 150 MP photo, 81 MB for ~560 photos of one turbine (a 100-turbine plan is 15.8 MB); the cap
+# gives that 12x headroom. One cap for every JSON, since `pitch` reads a file before it knows
+# its kind. A turbines.yaml is ~0.3 kB per turbine.
+MAX_JSON_BYTES = 1_000_000_000
+MAX_YAML_BYTES = 16_000_000
 
 _repr = reprlib.Repr()
 _repr.maxlevel, _repr.maxlist, _repr.maxtuple, _repr.maxdict = 3, 6, 6, 4
@@ -123,6 +130,40 @@ def write_json(path: str | Path, doc: Any, digits: int = FLOAT_DIGITS) -> Path:
     return atomic_write_text(path, dumps(doc, digits))
 
 
+def size_text(n: int) -> str:
+    """Bytes for a message: '2.1 GB', '512 MB', '980 kB', '12 bytes' (decimal units)."""
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n >= scale:
+            v = n / scale
+            return f"{v:.1f} {unit}" if v < 10 and v != int(v) else f"{v:.0f} {unit}"
+    return f"{n} bytes"
+
+
+def read_capped(path: str | Path, max_bytes: int, kind: str) -> str:
+    """The UTF-8 text of the input file ``path``, which may hold at most ``max_bytes``: a larger
+    one is refused from its size before a byte is read (a pipe is read only up to the limit).
+    InputError (exit 3) naming the file if it is missing, a folder, unreadable or too large;
+    UnicodeDecodeError is left to the caller (a content error, which it names)."""
+    path = Path(path)
+    too_big = f"over the {size_text(max_bytes)} limit for a {kind} input (docs/exit-codes.md)"
+    try:
+        size = path.stat().st_size if path.is_file() else None
+        if size is not None and size > max_bytes:
+            raise InputError(f"{path}: {size_text(size)} is {too_big}")
+        with open(path, "rb") as f:
+            data = f.read(max_bytes + 1)
+    except FileNotFoundError:
+        raise InputError(f"{path}: file not found") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: is a folder, expected a {kind} file") from None
+    except OSError as e:
+        raise InputError(f"{path}: cannot read ({os_reason(e)})") from None
+    if len(data) > max_bytes:  # grew since, or a pipe / device with no size
+        raise InputError(f"{path}: more than {size_text(max_bytes)}, the limit for a {kind} input "
+                         "(docs/exit-codes.md)")
+    return data.decode("utf-8")
+
+
 class _NotANumber(ValueError):
     pass
 
@@ -139,20 +180,16 @@ def _finite_float(text: str) -> float:
 
 
 def read_json(path: str | Path, schema: str | None = None,
-              max_version: int | None = None, header_required: bool = True) -> Any:
-    """Read a JSON file, naming the file in any error. NaN, Infinity and numbers too large for
-    a float are refused (JSON has none). With ``schema``, the header is checked
+              max_version: int | None = None, header_required: bool = True,
+              max_bytes: int = MAX_JSON_BYTES) -> Any:
+    """Read a JSON file, naming the file in any error. A file over ``max_bytes`` is refused
+    before it is read; NaN, Infinity and numbers too large for a float are refused (JSON has
+    none). With ``schema``, the header is checked
     (``check_header``); ``header_required=False`` also accepts a file without one (a COCO file
     from another tool), but never one with another schema or a newer version."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{path}: file not found") from None
-    except IsADirectoryError:
-        raise InputError(f"{path}: is a folder, expected a JSON file") from None
-    except OSError as e:
-        raise InputError(f"{path}: cannot read ({os_reason(e)})") from None
+        text = read_capped(path, max_bytes, "JSON")
     except UnicodeDecodeError:
         raise InputError(f"{path}: not valid JSON (not UTF-8 text)") from None
     try:

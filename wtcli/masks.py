@@ -122,12 +122,32 @@ def check_pixels(h: int, w: int, where: str) -> None:
 
 
 def declared_size(data: np.ndarray) -> tuple[int, int] | None:
-    """(width, height) a PNG or JPEG file declares in its header, read without decoding it (so
-    a small file declaring a huge image is refused before anything is allocated); None for
-    other formats or a header too damaged to tell (the decoder then decides)."""
+    """(width, height) a PNG, JPEG, TIFF, BMP or WebP file declares in its header, read without
+    decoding it (so a small file declaring a huge image is refused before anything is
+    allocated); None for other formats or a header too damaged to tell (the decoder then
+    decides). The format is told from the bytes, not the file name: OpenCV decodes by content."""
     b = data[:1 << 20].tobytes()
     if b[:8] == b"\x89PNG\r\n\x1a\n" and len(b) >= 24 and b[12:16] == b"IHDR":
         return int.from_bytes(b[16:20], "big"), int.from_bytes(b[20:24], "big")
+    if b[:4] in (b"II*\0", b"MM\0*", b"II+\0", b"MM\0+"):
+        return _tiff_size(data)
+    if b[:2] == b"BM" and len(b) >= 26:
+        if int.from_bytes(b[14:18], "little") == 12:  # OS/2 BITMAPCOREHEADER: 16-bit sides
+            return int.from_bytes(b[18:20], "little"), int.from_bytes(b[20:22], "little")
+        w = int.from_bytes(b[18:22], "little", signed=True)
+        h = int.from_bytes(b[22:26], "little", signed=True)  # negative: stored top-down
+        return abs(w), abs(h)
+    if b[:4] == b"RIFF" and b[8:12] == b"WEBP" and len(b) >= 30:
+        chunk = b[12:16]
+        if chunk == b"VP8X":  # extended: canvas width-1 and height-1, 24 bits each
+            return int.from_bytes(b[24:27], "little") + 1, int.from_bytes(b[27:30], "little") + 1
+        if chunk == b"VP8L":  # lossless: 14 bits width-1, 14 bits height-1
+            bits = int.from_bytes(b[21:25], "little")
+            return (bits & 0x3FFF) + 1, ((bits >> 14) & 0x3FFF) + 1
+        if chunk == b"VP8 ":  # lossy key frame: 14-bit sides after the start code
+            return (int.from_bytes(b[26:28], "little") & 0x3FFF,
+                    int.from_bytes(b[28:30], "little") & 0x3FFF)
+        return None
     if b[:2] != b"\xff\xd8":
         return None
     i = 2
@@ -147,8 +167,42 @@ def declared_size(data: np.ndarray) -> tuple[int, int] | None:
     return None
 
 
+def _tiff_size(data: np.ndarray) -> tuple[int, int] | None:
+    """ImageWidth (tag 256) and ImageLength (257) of a TIFF's first IFD (the page OpenCV
+    decodes), classic or BigTIFF, either byte order, SHORT/LONG/LONG8 values; None if the IFD
+    lies outside the file or lacks either tag."""
+    order = "little" if data[0] == ord("I") else "big"
+    big = int(data[2]) == 43 or int(data[3]) == 43
+
+    def num(at: int, n: int) -> int | None:
+        return int.from_bytes(data[at:at + n].tobytes(), order) if 0 <= at and at + n <= len(data) \
+            else None
+
+    ifd = num(8, 8) if big else num(4, 4)
+    head, entry, count_n, value_at = (8, 20, 8, 12) if big else (2, 12, 4, 8)
+    entries = num(ifd, head) if ifd is not None else None
+    if entries is None:
+        return None
+    sizes = {3: 2, 4: 4, 16: 8}  # SHORT, LONG, LONG8
+    found: dict[int, int] = {}
+    for k in range(min(entries, 4096)):
+        at = ifd + head + k * entry
+        tag, kind = num(at, 2), num(at + 2, 2)
+        if tag is None or kind is None:
+            return None
+        if tag in (256, 257) and kind in sizes:
+            value = num(at + value_at, sizes[kind])
+            if value is None:
+                return None
+            found[tag] = value
+    if 256 in found and 257 in found:
+        return found[256], found[257]
+    return None
+
+
 def check_declared_size(data: np.ndarray, path: str | Path) -> None:
-    """InputError naming ``path`` if its PNG/JPEG header declares more than MAX_IMAGE_PIXELS."""
+    """InputError naming ``path`` if its header (``declared_size``) declares more than
+    MAX_IMAGE_PIXELS."""
     size = declared_size(data)
     if size is not None and size[0] * size[1] > MAX_IMAGE_PIXELS:
         raise InputError(f"{path}: image too large to decode ({size[0]}x{size[1]} is "

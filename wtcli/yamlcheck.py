@@ -14,7 +14,7 @@ from typing import Any, Iterable, Sequence
 import yaml
 
 from wtcli.errors import ConfigError
-from wtcli.jsonio import shown
+from wtcli.jsonio import MAX_YAML_BYTES, read_capped, shown
 
 _MISSING = object()
 
@@ -103,15 +103,12 @@ def parse_yaml(text: str) -> Any:
 
 
 def load_yaml(path: str | Path) -> Any:
+    """Read a YAML settings file safely (``parse_yaml``). A file that is missing, a folder,
+    unreadable or over MAX_YAML_BYTES is InputError (exit 3, like any input file); what it says
+    (syntax, duplicate keys, alias bombs, not UTF-8) is ConfigError (exit 4)."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: file not found") from None
-    except IsADirectoryError:
-        raise ConfigError(f"{path}: is a folder, expected a YAML file") from None
-    except OSError as e:
-        raise ConfigError(f"{path}: cannot read ({e.strerror or e.__class__.__name__})") from None
+        text = read_capped(path, MAX_YAML_BYTES, "YAML")
     except UnicodeDecodeError:
         raise ConfigError(f"{path}: not valid YAML (not UTF-8 text)") from None
     try:
