@@ -723,3 +723,30 @@ def test_tiff_and_bmp_headers_claiming_huge_images_are_refused(cli, weights, tmp
         line = one_error_line(cli("contours", mask, "--out", tmp_path / "c.json"), 3, mask)
         assert "over the limit of 200,000,000" in line, line
     assert not (tmp_path / "c.json").exists()
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs /proc")
+def test_second_output_options_are_not_called_out(cli, tmp_path):
+    # plan's --export-dir and --picture, fly's --pictures, pitch's --overlay-dir: the message
+    # names the path and does not send the user to change --out
+    ro = Path("/proc/wtinspect-out")
+    yaml_ = SAMPLE / "turbines.yaml"
+    for args in (("plan", yaml_, "--out", tmp_path / "p.json", "--export-dir", ro),
+                 ("plan", yaml_, "--out", tmp_path / "p.json", "--picture", ro / "p.png"),
+                 ("pitch", SAMPLE / "instances.json", "--out", tmp_path / "x.json",
+                  "--overlay-dir", ro)):
+        line = one_error_line(cli(*args), 3, ro)
+        assert "--out" not in line and "choose another output" in line, line
+    assert not (tmp_path / "p.json").exists() and not (tmp_path / "x.json").exists()
+
+
+def test_site_geojson_is_read_as_every_json_input(cli, tmp_path):
+    # NaN refused, the size capped: the one JSON reader (wtcli/jsonio.py)
+    src = (SAMPLE / "osm_wind.geojson").read_text()
+    nan = tmp_path / "nan.geojson"
+    nan.write_text(src.replace('"features": [', '"features": [NaN, ', 1))
+    out = tmp_path / "t.yaml"
+    assert "NaN is not a finite number" in one_error_line(cli("site", nan, "--out", out), 3, nan)
+    big = _sparse(tmp_path / "big.geojson", 2_100_000_000)
+    assert "over the 1 GB limit" in one_error_line(cli("site", big, "--out", out), 3, big)
+    assert not out.exists()

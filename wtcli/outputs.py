@@ -114,10 +114,11 @@ def check_outputs(files: Iterable[str | Path | None] = (),
                   folders: Iterable[str | Path | None] = ()) -> None:
     """One call per command, before its expensive work: every output file and folder it was
     given (None: not asked for) can be written. OutputError (exit 3) naming the first that
-    cannot."""
+    cannot. The message names the path, not an option: these come from several options
+    (``plan``'s --out, --picture, --export-dir)."""
     for f in files:
         if f is not None:
-            writable_file(f)
+            writable_file(f, "output file")
     for d in folders:
         if d is not None:
-            writable_folder(d)
+            writable_folder(d, "output folder")

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import csv
 import difflib
-import json
 import math
 import re
 from dataclasses import dataclass, field
@@ -21,6 +20,7 @@ import numpy as np
 import yaml
 
 from wtcli.errors import ConfigError, InputError
+from wtcli.jsonio import read_json
 from wtcli.plan.geodesy import MAX_SITE_RADIUS_M, geodetic_to_enu
 
 USWTDB_COLUMNS = ("case_id", "xlong", "ylat", "t_hh", "t_rd", "t_cap", "p_name")
@@ -188,10 +188,7 @@ def read_osm_geojson(path: str | Path, bbox=None, hub_default: float | None = No
     defines it for wind turbines) and ``rotor:diameter`` where tagged. Tags are read from the
     feature's properties or their ``tags`` member."""
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise InputError(f"{path}: cannot read the GeoJSON ({e.__class__.__name__}: {e})") from None
+    doc = read_json(path)  # size cap, NaN refused, errors naming the file (docs/exit-codes.md)
     feats = doc.get("features") if isinstance(doc, dict) else None
     if not isinstance(feats, list):
         raise InputError(f"{path}: not a GeoJSON FeatureCollection (no 'features' list)")
