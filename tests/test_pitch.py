@@ -455,7 +455,7 @@ def test_cli_demo_chain(cli, tmp_path):
             out / "overlays")
     assert r.exit_code == 0, r.stderr
     doc = json.loads((out / "pitch.json").read_text())
-    assert doc["schema"] == PITCH_SCHEMA and doc["schema_version"] == 2
+    assert doc["schema"] == PITCH_SCHEMA and doc["schema_version"] == 3
     img, = doc["images"]
     assert img["error"] is None and img["n_blades"] == 3
     assert [round(b["phi_deg"]) for b in img["blades"]] == [10, 130, 250]
@@ -677,7 +677,7 @@ def test_cli_records_admitted_blades_and_reads_version_1(cli, tmp_path):
     assert r.exit_code == 0, r.stderr
     assert "blade 3 (score 0.30) admitted below the score threshold 0.5" in r.stderr
     doc = json.loads((tmp_path / "p.json").read_text())
-    assert doc["schema_version"] == 2 and doc["score_threshold"] == 0.5
+    assert doc["schema_version"] == 3 and doc["score_threshold"] == 0.5
     img, = doc["images"]
     assert [b["admitted_low_score"] for b in img["blades"]] == [False, False, True]
     assert img["score_threshold"] == 0.5 and img["candidate_floor"] == 0.2

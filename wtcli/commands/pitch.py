@@ -12,7 +12,7 @@ from wtcli.console import err_console, make_progress
 from wtcli.errors import InputError, PartialFailure, PerceptionError
 from wtcli.jsonio import atomic_write_bytes, dumps, write_json
 from wtcli.pitch.inputs import is_photo, load_pitch_input, pitch_batch
-from wtcli.pitch.overlay import draw_pitch_overlay, overlay_background
+from wtcli.pitch.overlay import HUB_NOTE, draw_pitch_overlay, overlay_background
 from wtcli.segment.defaults import CANDIDATE_FLOOR
 
 
@@ -119,11 +119,17 @@ def register(app: typer.Typer) -> None:
                     typer.echo(f"{name}: blade {k + 1}: theta {b.theta_deg:7.2f}  "
                                f"{b.theta_class:<10}  phi {b.phi_deg:7.2f}  "
                                f"(eq. 7 minAreaRect {b.theta_eq7_deg:.2f})"
-                               + ("  admitted at low score" if b.admitted_low_score else ""))
+                               + ("  admitted at low score" if b.admitted_low_score else "")
+                               + ("" if b.direction_known else "  direction unknown"))
+                if not res.hub_in_frame:
+                    typer.echo(f"{name}: {HUB_NOTE[res.hub_source]}")
         n, bad = len(batch.results), batch.n_failed
         if out is not None or overlay_dir is not None:
             where = ", ".join(str(p) for p in (out, overlay_dir) if p is not None)
-            err_console.print(f"pitch of {n - bad}/{n} image(s) -> {where}")
+            unknown = sum(r is not None and not r.direction_known for r in batch.results)
+            err_console.print(f"pitch of {n - bad}/{n} image(s) -> {where}"
+                              + (f" ({unknown} with the hub out of frame: blade direction "
+                                 "unknown)" if unknown else ""))
         if bad:
             if n == 1:
                 raise PerceptionError(batch.errors[0])

@@ -1,7 +1,8 @@
 """Where a rotor's hub is in the image: the nacelle/hub instance's pixels near the blades'
 convergence point if there is a nacelle, else the convergence point (least-squares intersection
-of the blade axes), else the blades' common end, else (one blade alone) the blade's wider end
-(blades taper to the tip).
+of the blade axes), else the blades' common end. One blade alone: beyond the end the frame cuts
+when its other end lies inside the frame (``cut_ends``: a tip, the hub out of frame), else its
+wider end when the whole blade is in frame and clearly tapers; else the hub cannot be placed.
 """
 
 from __future__ import annotations
@@ -52,6 +53,14 @@ def common_end(axes: list[Axis]) -> np.ndarray:
     return np.mean(chosen, axis=0)
 
 
+def ends_meet(axes: list[Axis], point: np.ndarray, share: float = 0.25) -> bool:
+    """Does an end of every blade lie within ``share`` of its length of ``point`` (their
+    common end): blades of one hub, not blades of turbines apart?"""
+    p = np.asarray(point, float)
+    return all(min(np.linalg.norm(ax.point(ax.t_min) - p), np.linalg.norm(ax.point(ax.t_max) - p))
+               <= share * max(ax.t_max - ax.t_min, 1.0) for ax in axes)
+
+
 def wider_end(inst: InstanceContours, ax: Axis, decisive: bool = False) -> np.ndarray | None:
     """One blade alone: the end whose last quarter holds more pixels (root wider than tip).
     With ``decisive``, None unless one quarter holds at least 15 % more than the other and is
@@ -99,3 +108,36 @@ def region_centroid(inst: InstanceContours) -> np.ndarray:
     if m["m00"] <= 0:
         return np.asarray(inst.points.mean(axis=0), float)
     return np.array([m["m10"] / m["m00"] + x0, m["m01"] / m["m00"] + y0])
+
+
+def cut_ends(inst: InstanceContours, ax: Axis, image_size: tuple[int, int], margin: float = 2.0,
+             reach: float = 0.2) -> tuple[bool, bool]:
+    """Which ends of the blade's axis (``t_min``, ``t_max``) the frame cuts: the region has
+    pixels within ``margin`` px of the image border in that end's last ``reach`` of its length.
+    A cut end is where the frame stopped the mask, not where the blade ends: its width says
+    nothing about root or tip."""
+    h, w = image_size
+    region = inst.fill()
+    x0, y0, _, _ = inst.bbox
+    ys, xs = np.nonzero(region)
+    xs, ys = xs + x0, ys + y0
+    edge = (xs <= margin) | (ys <= margin) | (xs >= w - 1 - margin) | (ys >= h - 1 - margin)
+    if not edge.any():
+        return False, False
+    u = ax.direction
+    t = (xs[edge] - ax.centroid[0]) * u[0] + (ys[edge] - ax.centroid[1]) * u[1]
+    q = reach * (ax.t_max - ax.t_min)
+    return bool(t.min() <= ax.t_min + q), bool(t.max() >= ax.t_max - q)
+
+
+def touches(parts: ContourSet, point: np.ndarray, radius: float) -> bool:
+    """Does any of ``parts`` (towers, nacelles) have pixels within ``radius`` of ``point``?"""
+    p = np.asarray(point, float)
+    for other in parts:
+        x0, y0, x1, y1 = other.bbox
+        if not (x0 - radius <= p[0] <= x1 + radius and y0 - radius <= p[1] <= y1 + radius):
+            continue
+        ys, xs = np.nonzero(other.fill())
+        if len(xs) and float(np.min(np.hypot(xs + x0 - p[0], ys + y0 - p[1]))) <= radius:
+            return True
+    return False

@@ -18,6 +18,11 @@ from wtcli.pitch.result import PitchResult
 
 CLASS_COLORS_BGR = {HORIZONTAL: (80, 200, 40), ACUTE: (0, 165, 255), VERTICAL: (230, 60, 230)}
 _PART_GREY = {"blade": 90, "tower": 55, "nacelle": 120}
+# What the overlay and the summary say when the hub is not in the frame, by hub source.
+HUB_NOTE = {"none": "hub out of frame: direction unknown (axis only)",
+            "frame_edge": "hub out of frame, beyond the cut end",
+            "nacelle": "hub out of frame", "blade_axes": "hub out of frame (where the axes meet)",
+            "common_end": "hub out of frame", "blade_taper": "hub out of frame"}
 
 
 def mask_canvas(result: PitchResult) -> np.ndarray:
@@ -68,8 +73,11 @@ def draw_pitch_overlay(image_bgr: np.ndarray | None, result: PitchResult) -> np.
         root = tuple(int(round(v)) for v in b.root_px)
         tip = tuple(int(round(v)) for v in b.tip_px)
         length = max(1.0, math.dist(root, tip))
-        cv2.arrowedLine(img, root, tip, color, thick + 1, cv2.LINE_AA,
-                        tipLength=min(0.2, 30 * s / length))
+        if b.direction_known:
+            cv2.arrowedLine(img, root, tip, color, thick + 1, cv2.LINE_AA,
+                            tipLength=min(0.2, 30 * s / length))
+        else:  # the axis only: no arrowhead where the sense is unknown
+            cv2.line(img, root, tip, color, thick + 1, cv2.LINE_AA)
         # "#k" just beyond the tip; the numbers go in the table at the top left.
         tag = f"#{k + 1}"
         (tw, th), _ = cv2.getTextSize(tag, cv2.FONT_HERSHEY_SIMPLEX, scale, thick)
@@ -78,16 +86,21 @@ def draw_pitch_overlay(image_bgr: np.ndarray | None, result: PitchResult) -> np.
         x = int(np.clip(anchor[0] - tw / 2, 2, max(2, w - tw - 2)))
         y = int(np.clip(anchor[1] + th / 2, th + 2, h - 4))
         _text(img, tag, (x, y), scale, color, thick)
-    hub = tuple(int(round(v)) for v in result.hub_px)
-    cv2.circle(img, hub, max(3, round(6 * s)), (40, 40, 255), -1, cv2.LINE_AA)
-    cv2.circle(img, hub, max(3, round(6 * s)), (255, 255, 255), 1, cv2.LINE_AA)
+    if result.hub_px is not None:
+        hub = tuple(int(round(v)) for v in result.hub_px)
+        cv2.circle(img, hub, max(3, round(6 * s)), (40, 40, 255), -1, cv2.LINE_AA)
+        cv2.circle(img, hub, max(3, round(6 * s)), (255, 255, 255), 1, cv2.LINE_AA)
     step = int(24 * max(s, 0.7))
     for k, b in enumerate(result.blades):
-        _text(img, f"#{k + 1}  theta {b.theta_deg:5.1f}  {b.theta_class:<10}  phi {b.phi_deg:5.1f}"
+        phi = f"phi {b.phi_deg:5.1f}" if b.direction_known else "phi unknown"
+        _text(img, f"#{k + 1}  theta {b.theta_deg:5.1f}  {b.theta_class:<10}  {phi}"
                    f"  (eq. 7: {b.theta_eq7_deg:5.1f})"
                    + (f"  admitted, score {b.score:.2f}" if b.admitted_low_score else ""),
               (8, step * (k + 1)), scale,
               CLASS_COLORS_BGR[b.theta_class], thick)
+    if not result.hub_in_frame:
+        _text(img, HUB_NOTE[result.hub_source], (8, step * (len(result.blades) + 1)), scale,
+              (255, 255, 255), thick)
     # Legend: the classes and the angle convention.
     step = int(24 * max(s, 0.7))
     y = h - 4 * step + step // 2

@@ -78,7 +78,8 @@ def select_rotor(blades: ContourSet, axes: list[Axis],
     most pixels wins (the inspected turbine is the nearest, largest one). A small supporter
     (< 30 % of the largest one's pixels, not cut by the frame) whose wider end is away from the
     hub is a far turbine's blade pointing at it, and is left out. Without any candidate (one
-    blade; two in line and no nacelle) every blade is kept. In a close-up with the hub out of
+    blade; two in line and no nacelle) every blade is kept, unless one is ``CLOSE_UP_LENGTH``
+    times longer than every other: a close-up's blade, the rest far turbines'. In a close-up with the hub out of
     frame, the blades cut at their root by the frame win over a far rotor (see the code), and
     the hub returned is None."""
     n = len(axes)
@@ -116,6 +117,12 @@ def select_rotor(blades: ContourSet, axes: list[Axis],
         if (cut and sum(areas[k] for k in cut) > sum(areas[k] for k in best)
                 and max(lengths[k] for k in cut) >= CLOSE_UP_LENGTH * max(lengths[k] for k in best)):
             return cut, None
+    if best_c is None and n > 1:
+        # No hub candidate: a close-up's blade among far turbines' blades is far longer than
+        # any of them (its common end with them would be no hub at all).
+        order = sorted(range(n), key=lambda k: -lengths[k])
+        if lengths[order[0]] >= CLOSE_UP_LENGTH * lengths[order[1]]:
+            return [order[0]], None
     if best_c is not None and len(best) > 1:
         big = max(areas[k] for k in best)
         keep = []

@@ -177,6 +177,10 @@ def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None 
             t = mission.turbine(owner)
             name = f"{path}" if not image_name or Path(str(image_name)).name == path.name \
                 else f"{path}:{image_name}"
+            if not res.direction_known:  # an axis without its sense would put a blade 180° off
+                raise PerceptionError(f"{name}: unusable for blade angles: the hub is out of "
+                                      "frame and cannot be placed, so a blade's direction "
+                                      "(hub -> tip) is unknown; give a photo showing the hub")
             short = t.n_blades >= 3 and len(res.blades) == t.n_blades - 1
             if len(res.blades) != t.n_blades and not short:
                 raise PerceptionError(f"{name}: found {len(res.blades)} blade(s), turbine {owner} "
