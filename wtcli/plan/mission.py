@@ -636,13 +636,15 @@ def _chunks(job: tuple) -> list[Chunk]:
         add_gap_views(chunks, views, site, pp)
         # The views were chosen on what the passes missed; checked on the converged figure,
         # a side still below min_side_coverage gets views for what is left, round by round.
+        last = None
         for _ in range(GAP_ROUNDS):
             cov = _blade_coverage_from_chunks(t, chunks, mission.camera, gsd_eval,
                                               s.coverage_spacing_m, s.max_incidence_deg)
-            short = {int(b[5:]) - 1 for b, sides in cov.by_blade_side().items()
-                     if min(sides.values()) < s.min_side_coverage}
-            if not short:
-                break
+            mins = {int(b[5:]) - 1: min(sides.values()) for b, sides in cov.by_blade_side().items()}
+            short = {k for k, v in mins.items() if v < s.min_side_coverage}
+            if not short or (last is not None and all(mins[k] < last[k] + 0.005 for k in short)):
+                break  # met, or the last round gained less than half a point where it is short
+            last = mins
             more = gap_plan(t, cov.samples, cov.covered, site, pp, s.max_incidence_deg, reach,
                             short)[0]
             if not any(more.values()):

@@ -730,7 +730,8 @@ GAP_FINE_GRID = ((2.0, 6.0, 12),)
 GAP_FINE_CANDIDATES = 24000
 GAP_FINE_SAMPLES = 8  # at most this many samples searched one by one, per blade
 GAP_SPAN_BINS = 8  # what the grids leave is searched again in this many stretches of the span
-GAP_POINTS = 400  # missed samples of a blade the search is asked about at most
+GAP_BIN_AREA = 0.05  # m^2: a stretch missing less is not worth a view
+GAP_POINTS = 150  # missed samples of a blade the search is asked about at most
 
 
 def gap_views(turbine: Turbine, pts: np.ndarray, nrm: np.ndarray, area: np.ndarray,
@@ -895,11 +896,12 @@ def gap_plan(turbine: Turbine, samples: SurfaceSamples, covered: np.ndarray, sit
             bins = np.minimum((samples.span[idx] * GAP_SPAN_BINS).astype(int), GAP_SPAN_BINS - 1)
             for b in np.unique(bins):
                 sel = idx[(bins == b) & ~covered[idx]]
-                if len(sel) == 0 or len(out[k]) >= GAP_MAX_VIEWS:
+                if samples.area[sel].sum() < GAP_BIN_AREA or len(out[k]) >= GAP_MAX_VIEWS:
                     continue
                 for pos, fwd, got in gap_views(turbine, samples.points[sel], samples.normals[sel],
                                                samples.area[sel], site, pp, max_incidence_deg,
-                                               max_distance, 1):
+                                               max_distance, 1,
+                                               budget=GAP_CANDIDATES // GAP_SPAN_BINS * 2):
                     side_area = np.bincount(samples.side[sel][got], samples.area[sel][got],
                                             len(BLADE_SIDES))
                     out[k].append((pos, fwd, f"{turbine.id}/blade{k + 1}/"
