@@ -293,6 +293,8 @@ def test_cli_needs_a_scenario(cli, tmp_path):
     assert res.exit_code == 2
     res = cli("fly", "--scenario", tmp_path / "missing.yaml")
     assert res.exit_code == 3  # a missing input file (docs/exit-codes.md)
+    res = cli("fly", "--scenario", "no-such-scenario")  # neither a file nor a shipped name
+    assert res.exit_code == 4 and "no-such-scenario" in res.stderr
 
 
 @pytest.mark.slow
