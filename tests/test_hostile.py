@@ -750,3 +750,17 @@ def test_site_geojson_is_read_as_every_json_input(cli, tmp_path):
     big = _sparse(tmp_path / "big.geojson", 2_100_000_000)
     assert "over the 1 GB limit" in one_error_line(cli("site", big, "--out", out), 3, big)
     assert not out.exists()
+
+
+def test_site_csv_size_capped_and_bom_kept_working(cli, tmp_path):
+    out = tmp_path / "t.yaml"
+    bom = tmp_path / "bom.csv"
+    bom.write_bytes(b"\xef\xbb\xbf" + (SAMPLE / "uswtdb_sample.csv").read_bytes())
+    r = cli("site", bom, "--out", out)
+    assert r.exit_code == 0, r.stderr
+    big = _sparse(tmp_path / "big.csv", 2_100_000_000)
+    assert "2.1 GB is over the 1 GB limit for a CSV input" in one_error_line(
+        cli("site", big, "--out", tmp_path / "u.yaml"), 3, big)
+    latin1 = tmp_path / "latin1.csv"
+    latin1.write_bytes((SAMPLE / "uswtdb_sample.csv").read_bytes() + "caf\xe9\n".encode("latin-1"))
+    assert "not UTF-8" in one_error_line(cli("site", latin1, "--out", tmp_path / "v.yaml"), 3, latin1)

@@ -20,7 +20,7 @@ import numpy as np
 import yaml
 
 from wtcli.errors import ConfigError, InputError
-from wtcli.jsonio import read_json
+from wtcli.jsonio import MAX_JSON_BYTES, read_capped, read_json
 from wtcli.plan.geodesy import MAX_SITE_RADIUS_M, geodetic_to_enu
 
 USWTDB_COLUMNS = ("case_id", "xlong", "ylat", "t_hh", "t_rd", "t_cap", "p_name")
@@ -140,10 +140,11 @@ def read_uswtdb(path: str | Path, project: str | None = None, bbox=None,
     """Turbines of a USWTDB CSV, filtered by project name (case-insensitive) and/or bounding box
     ``(min_lon, min_lat, max_lon, max_lat)``; rows are numbered as in a spreadsheet (header = 1)."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as e:
-        raise InputError(f"{path}: cannot read the CSV ({e.__class__.__name__}: {e})") from None
+    try:  # the size capped as every input's (docs/exit-codes.md); a BOM allowed
+        text = read_capped(path, MAX_JSON_BYTES, "CSV").removeprefix("\ufeff")
+    except UnicodeDecodeError as e:
+        raise InputError(f"{path}: cannot read the CSV (not UTF-8 text: {e.reason} at byte "
+                         f"{e.start})") from None
     reader = csv.DictReader(text.splitlines())
     cols = [c.strip() for c in (reader.fieldnames or [])]
     missing = [c for c in USWTDB_COLUMNS if c not in cols]
