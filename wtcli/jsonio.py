@@ -24,8 +24,8 @@ FLOAT_DIGITS = 6
 SHOWN_CHARS = 80  # the most characters of an input value an error message quotes
 # The largest input files read, checked from the size before reading (docs/exit-codes.md,
 # "Input sizes"). The largest JSON we write is a flight's instances file: about 145 kB per
-# 150 MP photo, 81 MB for ~560 photos of one turbine (a 100-turbine plan is 15.8 MB); the cap
-# gives that 12x headroom. One cap for every JSON, since `pitch` reads a file before it knows
+# 150 MP photo, 91 MB for the 626 photos of one sample turbine (a 100-turbine plan is
+# 15.8 MB); the cap gives that 11x headroom. One cap for every JSON, since `pitch` reads a file before it knows
 # its kind. A turbines.yaml is ~0.3 kB per turbine.
 MAX_JSON_BYTES = 1_000_000_000
 MAX_YAML_BYTES = 16_000_000
