@@ -5,7 +5,11 @@ both ask here; the distance to one turbine's parts is ``Turbine.clearance`` (com
 ``clearance_site_kernel.py``.
 
 The distances are the one turbine model's (``Turbine.clearance``, a lower bound of the true
-distance). A turbine far from a point is skipped: its bounding box, which encloses every part,
+distance), each less its turbine's geometry uncertainty (``Site(uncertainty=...)``,
+``mission.geometry_uncertainty_m``): the distance to the model grown by that much, so a
+clearance kept here is kept from every turbine whose surfaces lie within the uncertainty of the
+modelled ones (thicker blades, a bigger hub, a nacelle further forward). Below, "the turbine"
+means the model so grown; its boxes are grown with it. A turbine far from a point is skipped: its bounding box, which encloses every part,
 grown by the cull distance does not contain the point, so the point is farther than that from
 every part of it, and the value reported there (the cull distance) is still a lower bound.
 
@@ -44,11 +48,12 @@ def enclosing_box(t: Turbine) -> tuple[np.ndarray, np.ndarray]:
     a_max = max(t.blade_root_chord, t.blade_max_chord, t.blade_tip_chord) / 2.0
     reach = max(t.tip_radius + t.overhang + t.nacelle_length + t.hub_radius,
                 t.overhang + t.tip_radius + a_max,
-                math.hypot(0.6 * t.nacelle_length, 0.5 * t.nacelle_width),
+                math.hypot(abs(t.nacelle_ahead) + 0.5 * t.nacelle_length, 0.5 * t.nacelle_width),
                 t.tower_base_radius, t.tower_top_radius)
     b = t.base_xyz
     z_lo = min(b[2], b[2] + t.hub_height - t.tip_radius - a_max)
-    z_hi = max(b[2] + t.hub_height + reach, b[2] + t.hub_height + 0.5 * t.nacelle_height)
+    z_hi = max(b[2] + t.hub_height + reach,
+               b[2] + t.hub_height + t.nacelle_above_hub + 0.5 * t.nacelle_height)
     return np.array([b[0] - reach, b[1] - reach, z_lo]), np.array([b[0] + reach, b[1] + reach, z_hi])
 
 
@@ -60,7 +65,7 @@ def part_boxes(t: Turbine) -> tuple[np.ndarray, np.ndarray]:
     b = t.base_xyz
     rotor_lo = lo.copy()
     rotor_lo[2] = max(lo[2], b[2] + min(t.hub_height - t.tip_radius - a_max,
-                                        t.hub_height - 0.5 * t.nacelle_height,
+                                        t.tower_height,
                                         t.hub_height - t.hub_radius))
     r = max(t.tower_base_radius, t.tower_top_radius)
     return (np.array([rotor_lo, [b[0] - r, b[1] - r, b[2]]]),
@@ -68,20 +73,31 @@ def part_boxes(t: Turbine) -> tuple[np.ndarray, np.ndarray]:
 
 
 class Site:
+    """The turbines of a site (and its ground) as the planner keeps clear of them.
+
+    ``uncertainty``: each turbine's geometry uncertainty in metres (one number for all, or one
+    per turbine; default 0): how far the real surfaces may lie outside the modelled ones. Every
+    clearance is then measured to the model grown by it (module docstring)."""
+
     def __init__(self, turbines: list[Turbine] | tuple[Turbine, ...], horizon_m: float = HORIZON_M,
-                 launch: np.ndarray | None = None):
+                 launch: np.ndarray | None = None, uncertainty: float | list[float] | np.ndarray = 0.0):
         self.turbines = list(turbines)
         self.horizon = float(horizon_m)
+        u = np.broadcast_to(np.asarray(uncertainty, float), (len(self.turbines),)).copy()
+        if not (np.isfinite(u).all() and (u >= 0).all()):
+            raise ValueError(f"expected uncertainties >= 0 m, one per turbine, got {u.tolist()}")
+        self.uncertainty = u
+        self._u_max = float(u.max()) if len(u) else 0.0
         boxes = [enclosing_box(t) for t in self.turbines]
-        self.box_lo = np.array([b[0] for b in boxes]).reshape(-1, 3)
-        self.box_hi = np.array([b[1] for b in boxes]).reshape(-1, 3)
+        self.box_lo = np.array([b[0] for b in boxes]).reshape(-1, 3) - u[:, None]
+        self.box_hi = np.array([b[1] for b in boxes]).reshape(-1, 3) + u[:, None]
         self.lo = self.box_lo - self.horizon
         self.hi = self.box_hi + self.horizon
         # Capped queries cull with the two tighter boxes per turbine (their grown union lies
         # inside the horizon's box, so the grid built for that serves both).
         parts = [part_boxes(t) for t in self.turbines]
-        self.part_lo = np.array([p[0] for p in parts]).reshape(-1, 2, 3)
-        self.part_hi = np.array([p[1] for p in parts]).reshape(-1, 2, 3)
+        self.part_lo = np.array([p[0] for p in parts]).reshape(-1, 2, 3) - u[:, None, None]
+        self.part_hi = np.array([p[1] for p in parts]).reshape(-1, 2, 3) + u[:, None, None]
         # The model's blade distance is at least this factor times the true distance.
         self._taper = np.array([t._blade_taper_cos() for t in self.turbines])
         self._taper_min = float(self._taper.min()) if len(self._taper) else 1.0
@@ -125,13 +141,17 @@ class Site:
         """How far beyond its box a turbine is still evaluated for a query capped at ``cap``.
 
         Outside, the true distance exceeds it and the model's exceeds ``cap`` (the taper factor
-        is the model's only shortfall); the small addition covers rounding."""
-        return min(self.horizon, cap / self._taper_min + 0.01)
+        is the model's only shortfall); the small addition covers rounding. With an uncertainty
+        u the true distance to the bare model is beyond g + u, the model's beyond
+        taper (g + u), less u that is above taper g - (1 - taper) u: g grows by that."""
+        return min(self.horizon, (cap + (1.0 - self._taper_min) * self._u_max) / self._taper_min
+                   + 0.01)
 
     def _kernel_grid(self) -> tuple:
         """The site as ``clearance_site_kernel`` reads it: the boxes and their grid
         (``_kernel_boxes``), then each turbine's ``Turbine._kernel_params`` stacked (blade frames
-        padded to the most blades, ``nb`` telling how many are real); built on the first query."""
+        padded to the most blades, ``nb`` telling how many are real) and the uncertainties;
+        built on the first query."""
         if self._grid_args is None:
             params = [t._cached("kernel_params", t._kernel_params) for t in self.turbines]
             nb = np.array([len(f) for _, _, f in params], np.int64)
@@ -140,7 +160,7 @@ class Site:
                 frames[i, :len(f)] = f
             vec = np.array([v for v, _, _ in params], float) if params else np.zeros((0, 6, 3))
             sc = np.array([c for _, c, _ in params], float) if params else np.zeros((0, 1))
-            self._grid_args = self._kernel_boxes() + (vec, sc, frames, nb)
+            self._grid_args = self._kernel_boxes() + (vec, sc, frames, nb, self.uncertainty)
         return self._grid_args
 
     def _kernel_boxes(self) -> tuple:
@@ -181,19 +201,22 @@ class Site:
         return clearance_site_kernel.clearance(P, grow, grow == self.horizon, cap, *self._kernel_grid())
 
     def nearest_part(self, point: np.ndarray) -> tuple[str, float]:
-        """("T1 blade2", 2.3): the part of any turbine nearest a point, and its distance.
+        """("T1 blade2", 2.3): the part of any turbine nearest a point, and its distance (less
+        the turbine's uncertainty, as ``clearance``).
 
         Turbines are visited nearest box first and the search stops where a box is so far that
         no part inside can beat the best found: the model's distance is at least the blade taper
-        factor times the true one, which is at least the distance to the box."""
+        factor times the true one, which is at least the distance to the box (``cull_distance``
+        has the uncertainty's share)."""
         x = np.asarray(point, float).reshape(3)
         box = np.linalg.norm(np.maximum(np.maximum(self.box_lo - x, x - self.box_hi), 0.0), axis=1)
-        bound = box * self._taper * (1 - 1e-9) - 1e-9
+        bound = (box * self._taper - (1.0 - self._taper) * self.uncertainty) * (1 - 1e-9) - 1e-9
         dist: dict[int, np.ndarray] = {}
         for i in np.argsort(bound, kind="stable"):
             if dist and bound[i] > min(float(c.min()) for c in dist.values()):
                 break
-            dist[int(i)] = self.turbines[i].clearance_by_part(x[None])[0]
+            dist[int(i)] = np.maximum(self.turbines[i].clearance_by_part(x[None])[0]
+                                      - self.uncertainty[i], 0.0)
         best = ("nothing", np.inf)
         for i in sorted(dist):  # as over the whole site: the first turbine at the least distance
             c = dist[i]
@@ -378,7 +401,8 @@ def clearance_to_parts(turbines: list[Turbine] | tuple[Turbine, ...] | Site,
     The public call for code outside the planner (the flight simulator): ``turbines`` is a
     list of ``Turbine`` (or a ``Site`` already built for them), ``points`` (M, 3) ENU metres.
     Returns ``(distance, part)``: ``distance`` (M,) float, ``Turbine.clearance_by_part``'s
-    values (never more than the true distance; 0 inside a part); ``part`` (M,) object array of
+    values (never more than the true distance; 0 inside a part): to the modelled surfaces
+    themselves, whatever uncertainty a ``Site`` given here carries; ``part`` (M,) object array of
     names such as ``"T1/blade2"``. Distances are capped at ``HORIZON_M`` (as ``Site.clearance``;
     there a lower bound); a point farther than that beyond every turbine's enclosing box gets
     the part ``""``.

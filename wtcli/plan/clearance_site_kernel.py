@@ -7,8 +7,8 @@ sample generation) around the compiled turbine distance. The rules are ``clearan
 docstring's, unchanged: the same culling boxes, the same leg samples, the same values;
 tests/test_plan.py checks them against every turbine and every sample.
 
-The kernels take the site as ``Site._kernel_grid`` lays it out: box corners, the cell grid and
-the stacked turbine parameters of ``Turbine._kernel_params``.
+The kernels take the site as ``Site._kernel_grid`` lays it out: box corners, the cell grid, the
+stacked turbine parameters of ``Turbine._kernel_params`` and each turbine's geometry uncertainty.
 """
 
 from __future__ import annotations
@@ -48,9 +48,11 @@ def _inside(t: int, px: float, py: float, pz: float, grow: float, horizon: bool,
 
 @_jit(inline=True)
 def _point(px: float, py: float, pz: float, grow: float, horizon: bool, cap: float, lo, hi,
-           part_lo, part_hi, origin, cell, shape, start, members, vec, sc, frames, nb) -> float:
+           part_lo, part_hi, origin, cell, shape, start, members, vec, sc, frames, nb,
+           unc) -> float:
     """``Site.clearance`` of one point: the least distance of the turbines whose box holds it,
-    at most ``grow``; NaN for a NaN point."""
+    each less its geometry uncertainty ``unc[t]`` (the distance to the model grown by it, a
+    lower bound), at most ``grow``; NaN for a NaN point."""
     if math.isnan(px) or math.isnan(py) or math.isnan(pz):
         return np.nan
     out = grow
@@ -60,17 +62,18 @@ def _point(px: float, py: float, pz: float, grow: float, horizon: bool, cap: flo
     for m in range(start[c], start[c + 1]):
         t = members[m]
         if _inside(t, px, py, pz, grow, horizon, lo, hi, part_lo, part_hi):
-            out = min(out, point_clearance(px, py, pz, vec, sc, frames, t, nb[t], cap))
+            d = point_clearance(px, py, pz, vec, sc, frames, t, nb[t], cap + unc[t]) - unc[t]
+            out = min(out, max(d, 0.0))
     return out
 
 
 @_jit
 def clearance(P: np.ndarray, grow: float, horizon: bool, cap: float, lo, hi, part_lo, part_hi,
-              origin, cell, shape, start, members, vec, sc, frames, nb) -> np.ndarray:
+              origin, cell, shape, start, members, vec, sc, frames, nb, unc) -> np.ndarray:
     out = np.empty(P.shape[0])
     for i in range(P.shape[0]):
         out[i] = _point(P[i, 0], P[i, 1], P[i, 2], grow, horizon, cap, lo, hi, part_lo, part_hi,
-                        origin, cell, shape, start, members, vec, sc, frames, nb)
+                        origin, cell, shape, start, members, vec, sc, frames, nb, unc)
     return out
 
 
@@ -162,7 +165,7 @@ def stretches(ax: float, ay: float, az: float, bx: float, by: float, bz: float, 
 def segment_clearance(p0: np.ndarray, p1: np.ndarray, n: np.ndarray, slab_lo: np.ndarray,
                       slab_hi: np.ndarray, grow: float, horizon: bool, cap: float, lo, hi,
                       part_lo, part_hi, origin, cell, shape, start, members, vec, sc, frames,
-                      nb) -> np.ndarray:
+                      nb, unc) -> np.ndarray:
     """Per leg, the least ``_point`` clearance over its samples j / n (j = 0..n) inside a culling
     box; ``grow`` where none is (the caller subtracts half the sample spacing)."""
     out = np.full(p0.shape[0], grow)
@@ -176,7 +179,7 @@ def segment_clearance(p0: np.ndarray, p1: np.ndarray, n: np.ndarray, slab_lo: np
                 t = j / n[i]
                 c = _point(ax + dx * t, ay + dy * t, az + dz * t, grow, horizon, cap, lo, hi,
                            part_lo, part_hi, origin, cell, shape, start, members, vec, sc,
-                           frames, nb)
+                           frames, nb, unc)
                 best = min(best, c)
         out[i] = best
     return out

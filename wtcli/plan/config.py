@@ -48,14 +48,18 @@ FLEET_KEYS = ("uavs", "launch", "inspection_speed_m_s", "cruise_speed_m_s", "max
 MISSION_KEYS = ("safe_distance_m", "tracking_margin_m", "target_gsd_mm", "overlap",
                 "max_incidence_deg", "min_altitude_m", "takeoff_altitude_m", "min_side_coverage",
                 "coverage_spacing_m", "inspect_tower", "inspect_nacelle", "tower_columns",
-                "allow_coarser_gsd")
+                "allow_coarser_gsd", "geometry_uncertainty_m")
 TURBINE_KEYS = ("id", "position", "lat", "lon", "alt", "hub_height_m", "rotor_diameter_m",
                 "blades", "yaw_deg", "blade_azimuths_deg", "rotor_azimuth_deg", "blade_pitch_deg",
                 "tower", "nacelle", "blade", "hub_radius_m", "overhang_m", "blade_tips", "photo",
-                "camera_pose")
+                "camera_pose", "geometry_uncertainty_m")
 TOWER_KEYS = ("base_radius_m", "top_radius_m")
-NACELLE_KEYS = ("length_m", "width_m", "height_m")
-BLADE_KEYS = ("root_chord_m", "max_chord_m", "tip_chord_m")
+NACELLE_KEYS = ("length_m", "width_m", "height_m", "ahead_m", "above_hub_m")
+BLADE_KEYS = ("root_chord_m", "max_chord_m", "tip_chord_m", "max_chord_span_fraction",
+              "root_thickness_ratio", "max_chord_thickness_ratio", "tip_thickness_ratio")
+# How far the real surfaces may lie outside the modelled ones, m: the allowed range of
+# geometry_uncertainty_m (mission-wide and per turbine).
+UNCERTAINTY_RANGE_M = (0.0, 10.0)
 POSE_KEYS = ("position", "look_at", "roll_deg")
 # Where a point of a site may be, in ENU metres from the site origin: a real site is a few km
 # across (and exports are checked for sites of 10 km); beyond, a position is a typo or in
@@ -144,10 +148,15 @@ class Settings:
     inspect_nacelle: bool = bool(_default("mission", "inspect_nacelle"))
     tower_columns: int = int(_default("mission", "tower_columns"))
     allow_coarser_gsd: bool = bool(_default("mission", "allow_coarser_gsd"))
+    # How far a turbine's real surfaces may lie outside the modelled ones: the planner keeps
+    # safe_distance_m from the model grown by it (a turbine may override it).
+    geometry_uncertainty_m: float = float(_default("mission", "geometry_uncertainty_m"))
 
     def __post_init__(self) -> None:
         if not self.safe_distance_m > 0:
             raise ValueError(f"expected safe_distance_m > 0, got {self.safe_distance_m}")
+        if not self.geometry_uncertainty_m >= 0:
+            raise ValueError(f"expected geometry_uncertainty_m >= 0, got {self.geometry_uncertainty_m}")
         if self.tracking_margin_m < 0:
             raise ValueError(f"expected tracking_margin_m >= 0, got {self.tracking_margin_m}")
         if not 0 <= self.overlap < 1:
@@ -157,7 +166,8 @@ class Settings:
 
     @property
     def required_clearance_m(self) -> float:
-        """What the planner keeps from every part: safe distance plus the tracking margin."""
+        """What the planner keeps from every part of the model grown by the geometry
+        uncertainty: safe distance plus the tracking margin."""
         return self.safe_distance_m + self.tracking_margin_m
 
 
@@ -180,6 +190,7 @@ class TurbineExtras:
     # photo (a photo or pitch JSON, plan_mission's azimuths) | yaml | tips | default (evenly
     # spaced, blade 1 up)
     azimuth_source: str = "default"
+    geometry_uncertainty_m: float | None = None  # this turbine's; None: the mission's
 
 
 @dataclass(frozen=True)
@@ -205,6 +216,16 @@ class Mission:
 
     def extra(self, turbine_id: str) -> TurbineExtras:
         return self.extras.get(turbine_id) or TurbineExtras()
+
+    def geometry_uncertainty(self, turbine_id: str) -> float:
+        """How far turbine ``turbine_id``'s real surfaces may lie outside the model, m: its own
+        ``geometry_uncertainty_m``, else the mission's."""
+        u = self.extra(turbine_id).geometry_uncertainty_m
+        return self.settings.geometry_uncertainty_m if u is None else u
+
+    def geometry_uncertainties(self) -> list[float]:
+        """``geometry_uncertainty`` of every turbine, in ``turbines`` order (``Site``'s input)."""
+        return [self.geometry_uncertainty(t.id) for t in self.turbines]
 
     def turbine(self, turbine_id: str) -> Turbine:
         for t in self.turbines:
@@ -365,7 +386,8 @@ def mission_from_dict(d: Any, where: str = "turbines.yaml", base_dir: str | Path
         inspect_tower=_boolean(m, "inspect_tower", w),
         inspect_nacelle=_boolean(m, "inspect_nacelle", w),
         tower_columns=number(m, "tower_columns", w, 0, 16, integer=True),
-        allow_coarser_gsd=_boolean(m, "allow_coarser_gsd", w))
+        allow_coarser_gsd=_boolean(m, "allow_coarser_gsd", w),
+        geometry_uncertainty_m=number(m, "geometry_uncertainty_m", w, *UNCERTAINTY_RANGE_M))
 
     # fleet
     w = f"{where}: fleet"
@@ -444,6 +466,10 @@ def _turbine(td: Any, w: str, origin: dict | None, base_dir: Path) -> tuple[Turb
         kw["nacelle_length"] = number(nm, "length_m", nw, 1, 40, default=None)
         kw["nacelle_width"] = number(nm, "width_m", nw, 0.5, 20, default=None)
         kw["nacelle_height"] = number(nm, "height_m", nw, 0.5, 20, default=None)
+        kw["nacelle_ahead"] = number(nm, "ahead_m", nw, -20, 20, default=None)
+        above = number(nm, "above_hub_m", nw, -10, 10, default=None)
+        if above is not None:
+            kw["nacelle_above_hub"] = above
     if td.get("blade") is not None:
         bw = f"{w}.blade"
         bm = need_mapping(td["blade"], bw)
@@ -451,8 +477,17 @@ def _turbine(td: Any, w: str, origin: dict | None, base_dir: Path) -> tuple[Turb
         kw["blade_root_chord"] = number(bm, "root_chord_m", bw, 0.1, 15, default=None)
         kw["blade_max_chord"] = number(bm, "max_chord_m", bw, 0.1, 15, default=None)
         kw["blade_tip_chord"] = number(bm, "tip_chord_m", bw, 0.05, 15, default=None)
+        for key, field_name, lo in (("max_chord_span_fraction", "blade_max_chord_at", 0.05),
+                                    ("root_thickness_ratio", "blade_root_thickness_ratio", 0.1),
+                                    ("max_chord_thickness_ratio", "blade_max_chord_thickness_ratio", 0.1),
+                                    ("tip_thickness_ratio", "blade_tip_thickness_ratio", 0.05)):
+            hi = 0.6 if key == "max_chord_span_fraction" else 1.0
+            v = number(bm, key, bw, lo, hi, default=None)
+            if v is not None:
+                kw[field_name] = v
     kw["hub_radius"] = number(td, "hub_radius_m", w, 0.2, 10, default=None)
     kw["overhang"] = number(td, "overhang_m", w, 0, 30, default=None)
+    uncertainty = number(td, "geometry_uncertainty_m", w, *UNCERTAINTY_RANGE_M, default=None)
 
     tips = None
     if td.get("blade_tips") is not None:
@@ -508,4 +543,4 @@ def _turbine(td: Any, w: str, origin: dict | None, base_dir: Path) -> tuple[Turb
         photo = Path(string(td, "photo", w))
         if not photo.is_absolute():
             photo = base_dir / photo
-    return turbine, TurbineExtras(photo, tips, pose, source)
+    return turbine, TurbineExtras(photo, tips, pose, source, uncertainty)

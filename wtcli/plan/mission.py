@@ -64,7 +64,10 @@ def pass_params(mission: Mission) -> tuple[PassParams, float, float]:
     # keep at least 0.3 m beyond the safe distance even with no tracking margin.
     req = s.safe_distance_m + max(s.tracking_margin_m, 0.3)
     st_gsd = GSD_FILL * cam.distance_for_gsd(s.target_gsd_mm)
-    st_min = 1.01 * req + 0.05  # the model's clearance is a slightly conservative lower bound
+    # Site measures to the model grown by each turbine's geometry uncertainty: the standoff
+    # from the bare model keeps the required clearance from the most grown one.
+    grown = req + max(mission.geometry_uncertainties())
+    st_min = 1.01 * grown + 0.05  # the model's clearance is a slightly conservative lower bound
     if st_gsd >= st_min:
         st, gsd_eval = st_gsd, s.target_gsd_mm
     elif s.allow_coarser_gsd:
@@ -73,7 +76,8 @@ def pass_params(mission: Mission) -> tuple[PassParams, float, float]:
     else:
         raise PlanError(
             f"target_gsd_mm {s.target_gsd_mm:g} needs the camera within {st_gsd:.2f} m of the "
-            f"surface, closer than safe_distance_m + tracking_margin_m = {req:g} m; use a longer "
+            f"surface, closer than safe_distance_m + tracking_margin_m + geometry_uncertainty_m "
+            f"= {grown:g} m; use a longer "
             f"lens, a coarser target_gsd_mm (>= {float(cam.gsd_mm(st_min / GSD_FILL)):.2f}) or "
             "allow_coarser_gsd: true")
     pp = PassParams(cam, st, 0.97 * cam.distance_for_gsd(gsd_eval), req, st_min, s.overlap,
@@ -741,8 +745,8 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
     real = list(mission.turbines)
     assumed = real if pattern == "adaptive" else [y_turbine(t) for t in real]
     launch = np.array(fl.launch, float) if fl.launch is not None else default_launch(real[0])
-    site_plan = Site(assumed, launch=launch)
-    site_real = Site(real, launch=launch)
+    site_plan = Site(assumed, launch=launch, uncertainty=mission.geometry_uncertainties())
+    site_real = Site(real, launch=launch, uncertainty=mission.geometry_uncertainties())
     lc = float(site_real.clearance(launch[None])[0])
     if lc < s.safe_distance_m:
         part, d = site_real.nearest_part(launch)
@@ -873,7 +877,8 @@ def _summary(routes: list[Route], mission: Mission, pattern: str, check: dict, c
                        "azimuths_deg": list(t.azimuths_deg),
                        # the paper's Fig. 4 class of each blade as a front photo shows it
                        "tilt_classes": [classify_theta(a % 180.0) for a in t.azimuths_deg],
-                       "azimuth_source": mission.extra(t.id).azimuth_source}
+                       "azimuth_source": mission.extra(t.id).azimuth_source,
+                       "geometry_uncertainty_m": mission.geometry_uncertainty(t.id)}
     s = mission.settings
     return {
         "pattern": pattern,

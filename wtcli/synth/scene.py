@@ -108,7 +108,10 @@ def sample_turbine(rng: np.random.Generator, tid: str = "T1", base=(0.0, 0.0, 0.
         nacelle_length=0.25 * R * scale["nl"], nacelle_width=0.09 * R * scale["nw"],
         nacelle_height=0.09 * R * scale["nh"], hub_radius=0.05 * R * scale["hub"],
         blade_root_chord=0.055 * R * scale["chord"], blade_max_chord=0.075 * R * scale["chord"],
-        blade_tip_chord=0.015 * R * scale["tip"])
+        blade_tip_chord=0.015 * R * scale["tip"],
+        # The blade sections the renders were drawn with (the trained models learnt them),
+        # thinner than the planner's conservative defaults.
+        blade_max_chord_thickness_ratio=0.40, blade_tip_thickness_ratio=0.18)
 
 
 def _view_offset(rng: np.random.Generator, view: str) -> float:
