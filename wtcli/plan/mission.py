@@ -627,7 +627,8 @@ def _chunks(job: tuple) -> list[Chunk]:
         reach = mission.camera.distance_for_gsd(1.02 * gsd_eval)
         views, covered = gap_plan(t, cov.samples, cov.covered, site, pp, s.max_incidence_deg, reach)
         split: dict[int, set[str]] = {}
-        for b, sides in Coverage(cov.samples, covered, cov.best_gsd_mm).by_blade_side().items():
+        predicted = Coverage(cov.samples, covered, cov.best_gsd_mm).by_blade_side()
+        for b, sides in predicted.items():
             low = {side for side, v in sides.items() if v < SPLIT_BELOW}
             if low:
                 split[int(b[5:]) - 1] = low
@@ -641,7 +642,11 @@ def _chunks(job: tuple) -> list[Chunk]:
         # The views were chosen on what the passes missed; checked on the converged figure,
         # a side still below min_side_coverage gets views for what is left, round by round.
         last = None
-        for _ in range(GAP_ROUNDS):
+        # The views' own prediction keeps margins (incidence, frame, GSD): where it meets the
+        # floor on every side and nothing was rebuilt, the check is not needed.
+        sure = not split and all(min(sides.values()) >= s.min_side_coverage
+                                 for sides in predicted.values())
+        for _ in range(0 if sure else GAP_ROUNDS):
             cov = _blade_coverage_from_chunks(t, chunks, mission.camera, gsd_eval,
                                               s.coverage_spacing_m, s.max_incidence_deg)
             mins = {int(b[5:]) - 1: min(sides.values()) for b, sides in cov.by_blade_side().items()}
