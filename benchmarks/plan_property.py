@@ -340,7 +340,11 @@ def _write_results(name: str, summary: dict, res: list[dict]) -> Path:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0],
+        epilog="The full figure: python benchmarks/plan_property.py 1000 --jobs 2 --log cases.jsonl "
+               "(about an hour on 2 free cores; a stopped run is summarised with --from-log "
+               "cases.jsonl). N=100 is enough while developing.")
     ap.add_argument("n", nargs="?", type=int, default=1000)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--start", type=int, default=0, help="first seed")
