@@ -113,3 +113,65 @@ def test_plan_reports_and_gates_on_the_converged_figure():
         with pytest.raises(PlanError, match=r"turbine T1 blade\d \w+: predicted coverage .*% < "
                                             r"min_side_coverage 100%"):
             plan_mission(Mission((t,), CAM, settings=Settings(min_side_coverage=1.0)))
+
+
+def _figures(cov) -> dict:
+    return {**{f"{b}/{s}": v for b, sides in cov.by_blade_side().items() for s, v in sides.items()},
+            "structure": cov.structure_fraction()}
+
+
+def test_cached_figures_match_a_fresh_evaluation_as_photos_are_added_and_dropped():
+    """The planner asks for one turbine's coverage several times with a growing photo set;
+    ``turbine_coverage`` keeps each cell and what each photo said of it on the turbine. Each
+    answer must be the one a fresh evaluation (no cache, a fresh turbine) gives on the same
+    photos, and every kept sample's state the plain measure's (``measure_coverage``)."""
+    from wtcli.geometry.coverage import measure_coverage
+
+    t = blade_down()
+    eyes, rots = flank_photos(t)
+    # two more views of the tower and the nacelle, so structure samples are measured too
+    x = t.hub_center + np.array([0.0, 0.0, -30.0])
+    for e in (x + [-8.0, -6.0, 0.0], t.hub_center + [-6.0, 4.0, 3.0]):
+        eyes = np.vstack([eyes, e])
+        rots = np.concatenate([rots, look_at_rotation(e, x if e[2] < x[2] + 1 else t.hub_center)[None]])
+    order = np.random.default_rng(3).permutation(len(eyes))
+    steps = [order[: len(order) // 2], order[: 3 * len(order) // 4], order[::-1],
+             order[len(order) // 4:]]  # grows, grows (reordered), then drops a quarter
+    for step in steps:
+        cached = turbine_coverage(t, CAM, eyes[step], rots[step], 3.0, 0.5, 60.0)
+        fresh = turbine_coverage(Turbine.from_dict(t.to_dict()), CAM, eyes[step], rots[step],
+                                 3.0, 0.5, 60.0, cache=False)
+        a, b = _figures(cached), _figures(fresh)
+        assert a.keys() == b.keys()
+        for k in a:
+            assert a[k] == pytest.approx(b[k], abs=1e-4), (k, len(step))
+        assert len(cached.samples) == len(fresh.samples)
+        plain = measure_coverage(cached.samples, CAM, eyes[step], rots[step], 3.0)
+        np.testing.assert_array_equal(plain.covered, cached.covered)
+        np.testing.assert_array_equal(plain.best_gsd_mm, cached.best_gsd_mm)
+    assert 0.3 < a["blade1/trailing_edge"] < 0.99  # a real boundary was refined
+
+
+def test_refinement_stops_only_where_no_cell_could_be_cut():
+    """At the end no two neighbouring leaves differ unless both are at the finest level: the
+    compiled boundary search (``coverage_kernel.boundary_leaves``) misses no boundary that a
+    comparison of every neighbouring fine cell finds."""
+    t = blade_down()
+    eyes, rots = flank_photos(t)
+    L = 3
+    cov = turbine_coverage(t, CAM, eyes, rots, 3.0, 0.5, 60.0, "blades", levels=L, cache=False)
+    s = cov.samples
+    for k in range(t.n_blades):
+        r, n, _, _ = t.blade_grid(k, 0.5)
+        st = np.full((r << L, (4 * n) << L), -1, np.int8)
+        ow = np.full(st.shape, L, np.int8)
+        for i in np.nonzero(s.blade == k)[0]:
+            b = 1 << (L - int(s.level[i]))
+            st[s.row[i] * b:(s.row[i] + 1) * b, s.col[i] * b:(s.col[i] + 1) * b] = cov.covered[i]
+            ow[s.row[i] * b:(s.row[i] + 1) * b, s.col[i] * b:(s.col[i] + 1) * b] = s.level[i]
+        ok = st >= 0
+        for a, b_, oa, ob in ((st, np.roll(st, -1, 1), ow, np.roll(ow, -1, 1)),
+                              (st[:-1], st[1:], ow[:-1], ow[1:])):
+            both = (a >= 0) & (b_ >= 0) & (a != b_)
+            assert ((oa[both] == L) & (ob[both] == L)).all(), k
+        assert ok.mean() > 0.9  # the leaves tile the blade (less the stretch buried in the hub)

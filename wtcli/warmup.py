@@ -22,7 +22,7 @@ import numpy as np
 def warm_up() -> float:
     """Call every kernel once on a small site; returns the seconds it took."""
     from wtcli.geometry import Camera, Turbine, look_at_rotation
-    from wtcli.geometry.coverage import measure_coverage
+    from wtcli.geometry.coverage import measure_coverage, turbine_coverage
     from wtcli.plan.clearance import Site
 
     t0 = time.perf_counter()
@@ -42,6 +42,7 @@ def warm_up() -> float:
     samples = t.surface_samples(2.0)
     R = np.stack([look_at_rotation(p, t.hub_center) for p in P])
     measure_coverage(samples, Camera(5456, 3632, 16, 23.2), P, R, 2.0)
+    turbine_coverage(t, Camera(5456, 3632, 16, 23.2), P, R, 2.0, 2.0)  # the refinement's kernel
     _warm_flight()
     return time.perf_counter() - t0
 

@@ -87,53 +87,63 @@ def measure_coverage(samples: SurfaceSamples, camera: Camera, positions: np.ndar
     positions (P, 3) world; rotations (P, 3, 3) world->camera (as Camera.R). ``border_px`` is a
     fraction of the image size ignored at each edge (lens falloff, framing error). Occlusion is
     by ``samples.turbine`` (the turbine ``Turbine.surface_samples`` took them from)."""
-    return _measure(samples, camera, positions, rotations, target_gsd_mm, max_incidence_deg,
-                    gsd_tolerance, border_px)[0]
+    positions, rotations = _poses(positions, rotations)
+    _need_turbine(samples)
+    max_dist = camera.distance_for_gsd(target_gsd_mm * gsd_tolerance)
+    covered, best, _, _ = _evaluate(samples, None, camera, positions, rotations, max_dist,
+                                    max_incidence_deg, border_px)
+    return Coverage(samples, covered, best)
 
 
-def _measure(samples: SurfaceSamples, camera: Camera, positions: np.ndarray,
-             rotations: np.ndarray, target_gsd_mm: float, max_incidence_deg: float,
-             gsd_tolerance: float, border_px: float, half_size: np.ndarray | None = None
-             ) -> tuple[Coverage, np.ndarray]:
-    """``measure_coverage``, and with ``half_size`` (M,) (a sample's distance to its cell's
-    corners, m) which samples are marginal: some photo that has them in frame and within the
-    GSD distance sees them so near the incidence limit that the limit may cross their cell (the
-    normal turns by ``samples.turn_deg`` across it, the direction to the camera by up to
-    half_size / distance). Occlusion is not asked for these."""
+def _poses(positions: np.ndarray, rotations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     positions = np.asarray(positions, float).reshape(-1, 3)
     rotations = np.asarray(rotations, float).reshape(-1, 3, 3)
     if len(positions) != len(rotations):
         raise ValueError(f"expected as many rotations as positions, got {len(rotations)} and {len(positions)}")
+    return positions, rotations
+
+
+def _need_turbine(samples: SurfaceSamples) -> None:
     if samples.turbine is None:
         raise ValueError("expected samples from Turbine.surface_samples (with their turbine), got "
                          "samples without one: occlusion cannot be checked")
+
+
+def _evaluate(samples: SurfaceSamples, half_size: np.ndarray | None, camera: Camera,
+              positions: np.ndarray, rotations: np.ndarray, max_dist: float, limit: float,
+              border: float, wide: float | None = None, best_before: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(covered, best GSD (inf if none), near, firm) per sample, from these photos.
+
+    With ``half_size`` (M,) (a sample's distance to its cell's corners, m), which samples are
+    marginal: ``near``, some photo that has them in frame and within the GSD distance sees them
+    so near the incidence limit that the limit may cross their cell (the normal turns by
+    ``samples.turn_deg`` across it, the direction to the camera by up to half_size / distance);
+    ``firm``, some photo has the whole cell within the limit. Line of sight is not asked for
+    these. ``wide``: the incidence up to which pairs are looked at for them (at least the limit
+    plus every sample's margin). ``best_before`` (M,): the finest GSD other photos reached on
+    each sample (inf where none); pairs no finer cannot change it and are not traced."""
+    M = len(samples)
+    covered, best = np.zeros(M, bool), np.full(M, np.inf)
+    near, firm = np.zeros(M, bool), np.zeros(M, bool)
     P, N = samples.points, samples.normals
-    max_dist = camera.distance_for_gsd(target_gsd_mm * gsd_tolerance)
-    marginal = np.zeros(len(P), bool)
     if half_size is None:
-        s, p, g = _near_pairs(P, N, positions, rotations, camera, max_dist, max_incidence_deg, border_px)
+        s, p, dist, facing = _pairs(P, N, positions, rotations, camera, max_dist, limit, border)
     else:
-        # The pairs within the incidence limit plus the widest margin any sample may need (no
-        # photo is taken within a metre of the surface).
-        wide = min(max_incidence_deg + float(np.max(samples.turn_deg, initial=0.0)) / 2
-                   + float(np.degrees(np.max(half_size, initial=0.0) / 1.0)), 89.9)
-        s, p, g = _near_pairs(P, N, positions, rotations, camera, max_dist, wide, border_px)
-        rel = P[s] - positions[p]
-        dist = np.linalg.norm(rel, axis=1)
-        inc = np.degrees(np.arccos(np.clip(-np.einsum("ij,ij->i", rel, N[s]) / np.maximum(dist, 1e-9),
-                                           -1.0, 1.0)))
+        s, p, dist, facing = _pairs(P, N, positions, rotations, camera, max_dist, wide, border)
+        inc = np.degrees(np.arccos(np.clip(facing, -1.0, 1.0)))
         margin = samples.turn_deg[s] / 2 + np.degrees(half_size[s] / np.maximum(dist, 1e-9))
-        near = np.zeros(len(P), bool)  # a photo the limit may cross the cell for
-        near[s[np.abs(inc - max_incidence_deg) <= margin]] = True
-        firm = np.zeros(len(P), bool)  # a photo that has the whole cell within the limit
-        firm[s[inc <= max_incidence_deg - margin]] = True
-        inside = inc <= max_incidence_deg
-        s, p, g = s[inside], p[inside], g[inside]
-    # Every (sample, photo) pair that passes the cheap tests; the line of sight comes after.
-    covered = np.zeros(len(P), bool)
-    best = np.full(len(P), np.inf)
+        near[s[np.abs(inc - limit) <= margin]] = True
+        firm[s[inc <= limit - margin]] = True
+        inside = inc <= limit
+        s, p, dist = s[inside], p[inside], dist[inside]
+    g = camera.gsd_mm(dist)
+    if best_before is not None:
+        finer = g < best_before[s]
+        s, p, g = s[finer], p[finer], g[finer]
     if not len(s):
-        return Coverage(samples, covered, best), marginal
+        return covered, best, near, firm
+    # Every (sample, photo) pair that passes the cheap tests; the line of sight comes after.
     # Tracing a line of sight costs far more than the tests above, and one clear photo settles a
     # sample: trace each sample's photos finest GSD first, in rounds of 1, 2, 4, ... per sample,
     # and stop at the round where one is clear (its finest clear GSD is then in that round).
@@ -150,21 +160,167 @@ def _measure(samples: SurfaceSamples, camera: Camera, positions: np.ndarray,
         np.minimum.at(best, s[clear], g[clear])
         covered[s[clear]] = True
         lo, width = lo + width, 2 * width
-    if half_size is not None:
-        # Covered with no photo that holds the whole cell within the limit, or missed with a
-        # photo the limit may cross it for (line of sight not asked of these photos).
-        marginal = near & ~(covered & firm)
-    return Coverage(samples, covered, best), marginal
+    return covered, best, near, firm
 
 
 REFINE_LEVELS = 3  # blade cells at a coverage boundary are cut in 2 x 2 this many times
+
+
+def _cell_key(blade: np.ndarray, level: np.ndarray, row: np.ndarray, col: np.ndarray) -> np.ndarray:
+    """One int64 per blade cell (blade < 64, level < 16, row and col < 2**20)."""
+    return (((blade.astype(np.int64) << 4) + level) << 40) + (row.astype(np.int64) << 20) + col
+
+
+class _Cells:
+    """One turbine's cells at one sampling, as one measure (camera, GSD, incidence, border)
+    sees them: each cell's sample is made once and measured once per photo.
+
+    The planner asks for the coverage of the same turbine several times with a growing set of
+    photos (the gate after each round of gap views, then the plan's figure); what a sample's
+    photos say combines photo by photo (covered: any photo; finest GSD: the least; near and
+    firm: any), so a photo measured before is not measured again, and a cell cut before is not
+    made again. Kept on the turbine (``Turbine._cache``). A call without a photo measured
+    before (the planner rebuilds a pass) measures again the samples that photo had a pair with."""
+
+    def __init__(self, turbine: Turbine, camera: Camera, spacing: float, max_dist: float,
+                 limit: float, border: float, margins: bool) -> None:
+        self.turbine, self.camera, self.spacing = turbine, camera, float(spacing)
+        self.max_dist, self.limit, self.border, self.margins = max_dist, limit, border, margins
+        self.shapes = np.array([turbine.blade_grid(k, spacing) for k in range(turbine.n_blades)],
+                               float).reshape(-1, 4)
+        self.pool: SurfaceSamples | None = None
+        self.half = np.zeros(0)
+        self.covered, self.best = np.zeros(0, bool), np.zeros(0)
+        self.near, self.firm, self.seen = np.zeros(0, bool), np.zeros(0, bool), np.zeros(0, np.int64)
+        self.keys, self.at = np.zeros(0, np.int64), np.zeros(0, np.int64)  # sorted; -1: buried
+        self.pos, self.rot = np.zeros((0, 3)), np.zeros((0, 3, 3))
+        self.photo: dict[bytes, int] = {}
+        self.blocks: dict[str, np.ndarray] = {}
+        self.blocks["blades"] = self._add(turbine.surface_samples(spacing, "blades"))
+        # The incidence up to which pairs are looked at for the marginal test: the limit plus
+        # the widest margin any cell may need (a cut cell's turn and size are at most its
+        # parent's, and no photo is taken within a metre of the surface).
+        b = self.blocks["blades"]
+        self.wide = min(limit + float(np.max(self.pool.turn_deg[b], initial=0.0))
+                        + float(np.degrees(np.max(self.half[b], initial=0.0) / 1.0)), 89.9)
+
+    def _add(self, smp: SurfaceSamples) -> np.ndarray:
+        """Append samples to the pool; their indices. Blade cells are registered by key."""
+        first = len(self.half)
+        half = np.zeros(len(smp))
+        on = smp.blade >= 0
+        if on.any():
+            r, _, s0, s1 = self.shapes[smp.blade[on]].T
+            h = (s1 - s0) / (r * 2.0 ** smp.level[on])
+            half[on] = 0.5 * np.hypot(h, smp.area[on] / h)
+        self.pool = SurfaceSamples.concatenate([self.pool, smp]) if first else smp
+        self.half = np.concatenate([self.half, half])
+        self.covered = np.concatenate([self.covered, np.zeros(len(smp), bool)])
+        self.best = np.concatenate([self.best, np.full(len(smp), np.inf)])
+        self.near = np.concatenate([self.near, np.zeros(len(smp), bool)])
+        self.firm = np.concatenate([self.firm, np.zeros(len(smp), bool)])
+        self.seen = np.concatenate([self.seen, np.zeros(len(smp), np.int64)])
+        idx = np.arange(first, first + len(smp))
+        self._register(_cell_key(smp.blade[on], smp.level[on], smp.row[on], smp.col[on]), idx[on])
+        return idx
+
+    def _register(self, keys: np.ndarray, idx: np.ndarray) -> None:
+        keys, at = np.concatenate([self.keys, keys]), np.concatenate([self.at, idx])
+        order = np.argsort(keys, kind="stable")
+        self.keys, self.at = keys[order], at[order]
+
+    def _find(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        i = np.minimum(np.searchsorted(self.keys, keys), max(len(self.keys) - 1, 0))
+        found = (self.keys[i] == keys) if len(self.keys) else np.zeros(len(keys), bool)
+        return np.where(found, self.at[i] if len(self.keys) else -1, -1), found
+
+    def structure(self) -> np.ndarray:
+        if "structure" not in self.blocks:
+            self.blocks["structure"] = self._add(self.turbine.surface_samples(self.spacing, "structure"))
+        return self.blocks["structure"]
+
+    def cells(self, k: int, level: int, row: np.ndarray, col: np.ndarray) -> np.ndarray:
+        """Pool indices of blade k's cells (row, col) at ``level``, made where new; cells buried
+        in another part have none and are left out."""
+        keys = _cell_key(np.full(len(row), k), np.full(len(row), level), row, col)
+        idx, found = self._find(keys)
+        if not found.all():
+            miss = ~found
+            smp = self.turbine.blade_cell_samples(k, self.spacing, level, row[miss], col[miss])
+            self._add(smp)
+            made = np.isin(keys[miss], _cell_key(smp.blade, smp.level, smp.row, smp.col))
+            self._register(keys[miss][~made], np.full(int((~made).sum()), -1, np.int64))
+            idx, _ = self._find(keys)
+        return idx[idx >= 0]
+
+    def use(self, positions: np.ndarray, rotations: np.ndarray) -> None:
+        """Make the photo set these photos: new ones are added; where one measured before is
+        not among them, the samples it had a pair with (the only ones it could have changed)
+        are measured again."""
+        rows = [r.tobytes() for r in np.concatenate([positions, rotations.reshape(-1, 9)], axis=1)]
+        now = set(rows)
+        kept = np.array([r in now for r in self.photo], bool)
+        if not kept.all():
+            gone = np.nonzero(~kept)[0]
+            s = _pairs(self.pool.points, self.pool.normals, self.pos[gone], self.rot[gone],
+                       self.camera, self.max_dist, self.wide if self.margins else self.limit,
+                       self.border)[0]
+            s = np.unique(s)
+            self.covered[s], self.near[s], self.firm[s], self.best[s], self.seen[s] = \
+                False, False, False, np.inf, 0
+            # The rest were measured against the first ``seen`` photos; of those, the kept ones
+            # stay first, in the same order.
+            self.seen = np.r_[0, np.cumsum(kept)][self.seen]
+            self.pos, self.rot = self.pos[kept], self.rot[kept]
+            self.photo = {r: i for i, r in enumerate(r for r, k in zip(self.photo, kept) if k)}
+        new = []
+        for i, r in enumerate(rows):
+            if r not in self.photo:
+                self.photo[r] = len(self.pos) + len(new)
+                new.append(i)
+        if new:
+            self.pos = np.concatenate([self.pos, positions[new]])
+            self.rot = np.concatenate([self.rot, rotations[new]])
+
+    def measure(self, idx: np.ndarray) -> None:
+        """Bring the samples ``idx`` up to date with every photo."""
+        K = len(self.pos)
+        idx = idx[self.seen[idx] < K]
+        for n0 in np.unique(self.seen[idx]):
+            g = idx[self.seen[idx] == n0]
+            c, b, near, firm = _evaluate(self.pool[g], self.half[g] if self.margins else None,
+                                         self.camera, self.pos[n0:], self.rot[n0:], self.max_dist,
+                                         self.limit, self.border, self.wide, self.best[g])
+            self.covered[g] |= c
+            self.best[g] = np.minimum(self.best[g], b)
+            self.near[g] |= near
+            self.firm[g] |= firm
+            self.seen[g] = K
+
+    def marginal(self, idx: np.ndarray) -> np.ndarray:
+        """Covered with no photo that holds the whole cell within the limit, or missed with a
+        photo the limit may cross it for (line of sight not asked of these photos)."""
+        return self.near[idx] & ~(self.covered[idx] & self.firm[idx])
+
+
+def _cells_for(turbine: Turbine, camera: Camera, spacing: float, max_dist: float, limit: float,
+               border: float, margins: bool, cache: bool) -> _Cells:
+    if not cache:
+        return _Cells(turbine, camera, spacing, max_dist, limit, border, margins)
+    key = ("coverage_cells", camera.width_px, camera.height_px, camera.focal_mm,
+           camera.sensor_width_mm, float(spacing), float(max_dist), float(limit), float(border),
+           bool(margins))
+    store = turbine._cache.get(key)
+    if store is None:
+        store = turbine._cache[key] = _Cells(turbine, camera, spacing, max_dist, limit, border, margins)
+    return store
 
 
 def turbine_coverage(turbine: Turbine, camera: Camera, positions: np.ndarray,
                      rotations: np.ndarray, target_gsd_mm: float, spacing: float,
                      max_incidence_deg: float = 60.0, parts: str = "all",
                      levels: int = REFINE_LEVELS, gsd_tolerance: float = 1.05,
-                     border_px: float = 0.02) -> Coverage:
+                     border_px: float = 0.02, cache: bool = True) -> Coverage:
     """Coverage of ``turbine``'s surface (``parts`` as ``Turbine.surface_samples``), its blades
     sampled finer where the covered and the missed parts meet, so the figure converges.
 
@@ -176,73 +332,75 @@ def turbine_coverage(turbine: Turbine, camera: Camera, positions: np.ndarray,
     state differs from a neighbour's (along the span or round the section, at the finest level
     reached) is cut in 2 x 2 and its four middles measured, ``levels`` times over: the boundary
     is then placed within 1/2**levels of a cell, for little more work than the boundary's
-    length. Tower, nacelle and hub samples are measured as sampled."""
+    length. Tower, nacelle and hub samples are measured as sampled.
+
+    ``cache``: keep the cells and what each photo said of them on the turbine, so that a later
+    call on the same turbine with more photos measures only the new photos and the new cells
+    (the figure is the same either way; tests/test_coverage.py checks it)."""
+    positions, rotations = _poses(positions, rotations)
     L = int(levels)
-    shapes = [turbine.blade_grid(k, spacing) for k in range(turbine.n_blades)]
+    max_dist = camera.distance_for_gsd(target_gsd_mm * gsd_tolerance)
+    store = _cells_for(turbine, camera, spacing, max_dist, float(max_incidence_deg), border_px,
+                       L > 0, cache)
+    store.use(positions, rotations)
+    base = [store.blocks["blades"]] if parts in ("all", "blades") else []
+    if parts in ("all", "structure"):
+        base.append(store.structure())
+    base_idx = np.concatenate(base) if base else np.zeros(0, np.int64)
+    store.measure(base_idx)
 
-    def half_size(smp: SurfaceSamples) -> np.ndarray:
-        """Each blade sample's distance to its cell's corners (0 off blades)."""
-        out = np.zeros(len(smp))
-        on = smp.blade >= 0
-        r, _, s0, s1 = np.array(shapes, float)[smp.blade[on]].T
-        h = (s1 - s0) / (r * 2.0 ** smp.level[on])
-        out[on] = 0.5 * np.hypot(h, smp.area[on] / h)
-        return out
+    def result(idx: np.ndarray) -> Coverage:
+        return Coverage(store.pool[idx], store.covered[idx], store.best[idx])
 
-    def measure(smp: SurfaceSamples) -> tuple[Coverage, np.ndarray]:
-        return _measure(smp, camera, positions, rotations, target_gsd_mm, max_incidence_deg,
-                        gsd_tolerance, border_px, half_size(smp) if L > 0 else None)
-
-    base = turbine.surface_samples(spacing, parts)
-    cov, marginal = measure(base)
     if L <= 0 or parts == "structure" or not len(positions):
-        return cov
+        return result(base_idx)
+    pool = store.pool
     # Per blade, the finest grid: the state of the leaf cell over each fine cell (-1 none:
     # buried, or nothing sampled) and that leaf's level.
+    shapes = store.shapes.astype(np.int64)
     state = [np.full((r << L, (4 * n) << L), -1, np.int8) for r, n, _, _ in shapes]
     owner = [np.full(st.shape, L, np.int8) for st in state]
-    chunks = [(cov.samples, cov.covered, cov.best_gsd_mm)]
+    chunks = [base_idx]
     split: list[np.ndarray] = []  # keys of the cells cut (no longer leaves)
 
-    def key(k: np.ndarray, level: np.ndarray, row: np.ndarray, col: np.ndarray) -> np.ndarray:
-        return ((k.astype(np.int64) * (L + 1) + level) << 40) + (row.astype(np.int64) << 20) + col
-
-    def paint(smp: SurfaceSamples, covered: np.ndarray) -> None:
-        for k in np.unique(smp.blade[smp.blade >= 0]):
-            for lv in np.unique(smp.level[smp.blade == k]):
-                m = (smp.blade == k) & (smp.level == lv)
+    def paint(idx: np.ndarray) -> dict[int, np.ndarray]:
+        """The leaves ``idx`` onto their blades' grids; per blade their (level, row, col)."""
+        pool = store.pool
+        blade, level, row, col = pool.blade[idx], pool.level[idx], pool.row[idx], pool.col[idx]
+        covered = store.covered[idx]
+        out = {}
+        for k in np.unique(blade[blade >= 0]):
+            mk = blade == k
+            for lv in np.unique(level[mk]):
+                m = mk & (level == lv)
                 b = 1 << (L - int(lv))
                 st, ow = state[k], owner[k]
-                st.reshape(st.shape[0] // b, b, st.shape[1] // b, b)[smp.row[m], :, smp.col[m], :] = \
+                st.reshape(st.shape[0] // b, b, st.shape[1] // b, b)[row[m], :, col[m], :] = \
                     covered[m][:, None, None]
-                ow.reshape(ow.shape[0] // b, b, ow.shape[1] // b, b)[smp.row[m], :, smp.col[m], :] = lv
+                ow.reshape(ow.shape[0] // b, b, ow.shape[1] // b, b)[row[m], :, col[m], :] = lv
+            out[int(k)] = np.stack([level[mk], row[mk], col[mk]], axis=1).astype(np.int64)
+        return out
 
-    paint(cov.samples, cov.covered)
-    flagged = [(cov.samples, marginal)]
+    from wtcli.geometry import coverage_kernel
+
+    painted = paint(base_idx)
+    flagged = base_idx
     while True:
         todo = []  # (blade, level, row, col) of the leaves to cut
         # Leaves the incidence limit may cross (their own middle says nothing of it)
-        for smp, m in flagged:
-            m = m & (smp.blade >= 0) & (smp.level < L)
-            for k in np.unique(smp.blade[m]):
-                mk = m & (smp.blade == k)
-                todo.append((int(k), np.stack([smp.level[mk], smp.row[mk], smp.col[mk]],
-                                              axis=1).astype(np.int64)))
-        for k, (st, ow) in enumerate(zip(state, owner)):
-            ok = st >= 0
-            edge = np.zeros(st.shape, bool)
-            d = ok & np.roll(ok, -1, axis=1) & (st != np.roll(st, -1, axis=1))  # round the section
-            edge |= d | np.roll(d, 1, axis=1)
-            d = ok[:-1] & ok[1:] & (st[:-1] != st[1:])  # along the span
-            edge[:-1] |= d
-            edge[1:] |= d
-            edge &= ow < L
-            if not edge.any():
-                continue
-            i, j = np.nonzero(edge)
-            lv = ow[i, j].astype(np.int64)
-            i, j = i >> (L - lv), j >> (L - lv)
-            todo.append((k, np.stack([lv, i, j], axis=1)))
+        pool = store.pool
+        m = store.marginal(flagged) & (pool.blade[flagged] >= 0) & (pool.level[flagged] < L)
+        f = flagged[m]
+        for k in np.unique(pool.blade[f]):
+            fk = f[pool.blade[f] == k]
+            todo.append((int(k), np.stack([pool.level[fk], pool.row[fk], pool.col[fk]],
+                                          axis=1).astype(np.int64)))
+        # Leaves next to a leaf of the other state (along the span or round the section)
+        for k, u in painted.items():
+            cut = coverage_kernel.boundary_leaves(state[k], owner[k], L, u[:, 0].copy(),
+                                                  u[:, 1].copy(), u[:, 2].copy())
+            if len(cut):
+                todo.append((k, cut))
         if not todo:
             break
         by_blade: dict[int, list[np.ndarray]] = {}
@@ -252,7 +410,7 @@ def turbine_coverage(turbine: Turbine, camera: Camera, positions: np.ndarray,
         for k, us in by_blade.items():
             u = np.unique(np.concatenate(us), axis=0)
             lv, i, j = u[:, 0], u[:, 1], u[:, 2]
-            split.append(key(np.full(len(u), k), lv, i, j))
+            split.append(_cell_key(np.full(len(u), k), lv, i, j))
             for l0 in np.unique(lv):  # the parents' fine cells: nothing until the children say
                 m = lv == l0
                 bb = 1 << (L - int(l0))
@@ -264,21 +422,20 @@ def turbine_coverage(turbine: Turbine, camera: Camera, positions: np.ndarray,
                 m = lv == l0
                 ci = (2 * i[m])[:, None] + np.array([0, 0, 1, 1])
                 cj = (2 * j[m])[:, None] + np.array([0, 1, 0, 1])
-                new.append(turbine.blade_cell_samples(k, spacing, int(l0) + 1, ci.ravel(), cj.ravel()))
-        smp = SurfaceSamples.concatenate(new)
-        c, marginal = measure(smp)
-        paint(smp, c.covered)
-        chunks.append((smp, c.covered, c.best_gsd_mm))
-        flagged = [(smp, marginal)]
+                new.append(store.cells(k, int(l0) + 1, ci.ravel(), cj.ravel()))
+        idx = np.concatenate(new)
+        store.measure(idx)
+        painted = paint(idx)
+        chunks.append(idx)
+        flagged = idx
     if not split:
-        return cov
+        return result(base_idx)
     cut = np.concatenate(split)
-    keep = []
-    for smp, covered, best in chunks:
-        leaf = ~np.isin(key(smp.blade, smp.level, smp.row, smp.col), cut) | (smp.blade < 0)
-        keep.append((smp[leaf], covered[leaf], best[leaf]))
-    return Coverage(SurfaceSamples.concatenate([c[0] for c in keep]),
-                    np.concatenate([c[1] for c in keep]), np.concatenate([c[2] for c in keep]))
+    idx = np.concatenate(chunks)
+    pool = store.pool
+    leaf = ~np.isin(_cell_key(pool.blade[idx], pool.level[idx], pool.row[idx], pool.col[idx]), cut) \
+        | (pool.blade[idx] < 0)
+    return result(idx[leaf])
 
 
 CULL_SPLIT = 2  # cubes max_dist / 2 wide: finer ones cull closer but cost more (measured 2-4)
@@ -287,7 +444,16 @@ CULL_SPLIT = 2  # cubes max_dist / 2 wide: finer ones cull closer but cost more 
 def _near_pairs(P: np.ndarray, N: np.ndarray, positions: np.ndarray, rotations: np.ndarray,
                 camera: Camera, max_dist: float, max_incidence_deg: float,
                 border: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(sample, photo, GSD) of the pairs ``imaged`` passes, photo by photo (photo-major).
+    """(sample, photo, GSD) of the pairs ``imaged`` passes, photo by photo (photo-major)."""
+    s, p, dist, _ = _pairs(P, N, positions, rotations, camera, max_dist, max_incidence_deg, border)
+    return s, p, camera.gsd_mm(dist)
+
+
+def _pairs(P: np.ndarray, N: np.ndarray, positions: np.ndarray, rotations: np.ndarray,
+           camera: Camera, max_dist: float, max_incidence_deg: float,
+           border: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(sample, photo, distance, cosine of the incidence) of the pairs ``imaged`` passes, photo
+    by photo (photo-major).
 
     Speed: a photo sees only samples within max_dist and inside its frame, so the samples are
     hashed into cubes (max_dist / CULL_SPLIT wide) and each photo tests only the samples of the
@@ -298,7 +464,7 @@ def _near_pairs(P: np.ndarray, N: np.ndarray, positions: np.ndarray, rotations: 
     every candidate pair was built as arrays first, ~20 % of a plan's time."""
     empty = np.zeros(0, np.int64)
     if len(P) == 0 or len(positions) == 0:
-        return empty, empty, np.zeros(0)
+        return empty, empty, np.zeros(0), np.zeros(0)
     from wtcli.geometry import coverage_kernel  # numba is imported on first use (as Turbine.clearance)
 
     cell = max_dist * (1 + 1e-6) / CULL_SPLIT + 1e-6
@@ -316,10 +482,9 @@ def _near_pairs(P: np.ndarray, N: np.ndarray, positions: np.ndarray, rotations: 
     half = np.arctan(rho / camera.fx) + 1e-6
     cam = np.array([camera.fx, camera.cx, camera.cy, camera.width_px, camera.height_px,
                     border * camera.width_px, border * camera.height_px], float)
-    s, p, dist = coverage_kernel.near_pairs(
+    return coverage_kernel.near_pairs(
         np.ascontiguousarray(P, float), np.ascontiguousarray(N, float),
         np.ascontiguousarray(positions, float), np.ascontiguousarray(rotations, float),
         origin.astype(float), float(cell), shape.astype(np.int64), key[by_key], by_key,
         CULL_SPLIT, cam, float(max_dist), float(np.cos(np.radians(max_incidence_deg))),
         float(half), float(ball))
-    return s, p, camera.gsd_mm(dist)

@@ -1,10 +1,15 @@
-"""The coverage measure's pair search compiled: which (sample, photo) pairs pass ``imaged``.
+"""The coverage measure's loops compiled: the pair search and the refinement's boundary search.
 
-``coverage._near_pairs`` hashes the samples into cubes and, photo by photo, tests the samples of
-the cubes near the photo. As numpy array code it built every candidate pair as arrays (indices,
-offsets, relative vectors) and was ~20 % of a plan's time; here each candidate is tested where
-it is found and only the pairs that pass are written. The tests are ``coverage.imaged``'s, in
-the same arithmetic order; tests/test_occlusion.py checks the result against every pair.
+``near_pairs``: ``coverage._near_pairs`` hashes the samples into cubes and, photo by photo,
+tests the samples of the cubes near the photo. As numpy array code it built every candidate
+pair as arrays (indices, offsets, relative vectors) and was ~20 % of a plan's time; here each
+candidate is tested where it is found and only the pairs that pass are written. The tests are
+``coverage.imaged``'s, in the same arithmetic order; tests/test_occlusion.py checks the result
+against every pair.
+
+``boundary_leaves``: which refinement leaves touch a leaf of the other state. As numpy it
+compared every pair of neighbouring cells of each blade's finest grid (about a million) at
+every level of the refinement; here only the borders of the leaves just measured are walked.
 """
 
 from __future__ import annotations
@@ -21,8 +26,9 @@ def near_pairs(P: np.ndarray, N: np.ndarray, positions: np.ndarray, rotations: n
                origin: np.ndarray, cell: float, shape: np.ndarray, keys: np.ndarray,
                by_key: np.ndarray, reach: int, cam: np.ndarray, max_dist: float,
                cos_incidence: float, half: float, ball: float) -> tuple:
-    """(sample, photo, distance) of the pairs that pass, photo-major; within a photo cube by cube
-    (offsets x, y, z ascending, z fastest) and in ``by_key`` order within a cube.
+    """(sample, photo, distance, facing) of the pairs that pass, photo-major; within a photo cube
+    by cube (offsets x, y, z ascending, z fastest) and in ``by_key`` order within a cube. facing:
+    the cosine of the incidence angle.
 
     keys: the samples' cube keys sorted, by_key: the sample indices in that order; cam: fx, cx,
     cy, width, height (pixels) and the border margins mx, my (pixels)."""
@@ -32,6 +38,7 @@ def near_pairs(P: np.ndarray, N: np.ndarray, positions: np.ndarray, rotations: n
     out_s = np.empty(cap, np.int64)
     out_p = np.empty(cap, np.int64)
     out_d = np.empty(cap)
+    out_f = np.empty(cap)
     n = 0
     for p in range(positions.shape[0]):
         ox, oy, oz = positions[p, 0], positions[p, 1], positions[p, 2]
@@ -93,9 +100,80 @@ def near_pairs(P: np.ndarray, N: np.ndarray, positions: np.ndarray, rotations: n
                             out_s = _grow_int(out_s, cap)
                             out_p = _grow_int(out_p, cap)
                             out_d = _grow_float(out_d, cap)
-                        out_s[n], out_p[n], out_d[n] = s, p, dist
+                            out_f = _grow_float(out_f, cap)
+                        out_s[n], out_p[n], out_d[n], out_f[n] = s, p, dist, facing
                         n += 1
-    return _grow_int(out_s[:n], n), _grow_int(out_p[:n], n), _grow_float(out_d[:n], n)
+    return (_grow_int(out_s[:n], n), _grow_int(out_p[:n], n), _grow_float(out_d[:n], n),
+            _grow_float(out_f[:n], n))
+
+
+@_jit
+def boundary_leaves(state: np.ndarray, owner: np.ndarray, levels: int, level: np.ndarray,
+                    row: np.ndarray, col: np.ndarray) -> np.ndarray:
+    """(K, 3) (level, row, col) of the leaves to cut, repeats possible: of the leaves given
+    (level, row, col each) and of their neighbours, those below ``levels`` with a fine cell
+    next to a fine cell of the other state (both measured, state >= 0).
+
+    state, owner: one blade's finest grid (rows along the span, columns round the section,
+    wrapping), the state of the leaf over each fine cell (-1 none) and that leaf's level. A
+    leaf's fine cells share its state, so only the cells along its border can differ from a
+    neighbour; a pair of cells neither of which was just measured was compared before, and
+    then its leaves were cut unless they were at ``levels`` already."""
+    R, C = state.shape
+    cap = 1024
+    out = np.empty((cap, 3), np.int64)
+    n = 0
+    for q in range(level.shape[0]):
+        lv = level[q]
+        b = 1 << (levels - lv)
+        r0, c0 = row[q] * b, col[q] * b
+        mine = state[r0, c0]
+        if mine < 0:
+            continue
+        hit = False
+        for side in range(4):
+            t = 0
+            while t < b:  # along the border, one neighbouring leaf at a time
+                if side == 0:
+                    ni, nj = r0 - 1, c0 + t
+                elif side == 1:
+                    ni, nj = r0 + b, c0 + t
+                elif side == 2:
+                    ni, nj = r0 + t, (c0 - 1 + C) % C
+                else:
+                    ni, nj = r0 + t, (c0 + b) % C
+                if ni < 0 or ni >= R:
+                    break
+                o = owner[ni, nj]
+                sh = levels - o
+                # the next fine cell along this border that lies in another leaf
+                t = ((((nj >> sh) + 1) << sh) - c0) if side < 2 else ((((ni >> sh) + 1) << sh) - r0)
+                other = state[ni, nj]
+                if other < 0 or other == mine:
+                    continue
+                hit = True
+                if o < levels:
+                    if n + 2 > cap:
+                        cap *= 2
+                        out = _grow_rows(out, n, cap)
+                    out[n, 0], out[n, 1], out[n, 2] = o, ni >> sh, nj >> sh
+                    n += 1
+        if hit and lv < levels:
+            if n + 2 > cap:
+                cap *= 2
+                out = _grow_rows(out, n, cap)
+            out[n, 0], out[n, 1], out[n, 2] = lv, row[q], col[q]
+            n += 1
+    return _grow_rows(out, n, n)
+
+
+@_jit(inline=True)
+def _grow_rows(a: np.ndarray, n: int, size: int) -> np.ndarray:
+    b = np.empty((size, 3), np.int64)
+    for i in range(n):
+        for j in range(3):
+            b[i, j] = a[i, j]
+    return b
 
 
 @_jit(inline=True)
