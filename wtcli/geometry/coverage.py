@@ -123,6 +123,8 @@ def _evaluate(samples: SurfaceSamples, half_size: np.ndarray | None, camera: Cam
     these. ``wide``: the incidence up to which pairs are looked at for them (at least the limit
     plus every sample's margin). ``best_before`` (M,): the finest GSD other photos reached on
     each sample (inf where none); pairs no finer cannot change it and are not traced."""
+    from wtcli.geometry import coverage_kernel
+
     M = len(samples)
     covered, best = np.zeros(M, bool), np.full(M, np.inf)
     near, firm = np.zeros(M, bool), np.zeros(M, bool)
@@ -131,11 +133,9 @@ def _evaluate(samples: SurfaceSamples, half_size: np.ndarray | None, camera: Cam
         s, p, dist, facing = _pairs(P, N, positions, rotations, camera, max_dist, limit, border)
     else:
         s, p, dist, facing = _pairs(P, N, positions, rotations, camera, max_dist, wide, border)
-        inc = np.degrees(np.arccos(np.clip(facing, -1.0, 1.0)))
-        margin = samples.turn_deg[s] / 2 + np.degrees(half_size[s] / np.maximum(dist, 1e-9))
-        near[s[np.abs(inc - limit) <= margin]] = True
-        firm[s[inc <= limit - margin]] = True
-        inside = inc <= limit
+        inside = coverage_kernel.incidence_flags(
+            s, dist, facing, np.ascontiguousarray(samples.turn_deg, float),
+            np.ascontiguousarray(half_size, float), float(limit), near, firm)
         s, p, dist = s[inside], p[inside], dist[inside]
     g = camera.gsd_mm(dist)
     if best_before is not None:
@@ -147,13 +147,10 @@ def _evaluate(samples: SurfaceSamples, half_size: np.ndarray | None, camera: Cam
     # Tracing a line of sight costs far more than the tests above, and one clear photo settles a
     # sample: trace each sample's photos finest GSD first, in rounds of 1, 2, 4, ... per sample,
     # and stop at the round where one is clear (its finest clear GSD is then in that round).
-    order = np.lexsort((g, s))
-    s, p, g = s[order], p[order], g[order]
-    i = np.arange(len(s))
-    rank = i - np.maximum.accumulate(np.where(np.r_[True, s[1:] != s[:-1]], i, 0))
+    order, start = coverage_kernel.by_sample(s, g, M)
     lo, width = 0, 1
-    while lo <= rank.max():
-        sel = np.nonzero((rank >= lo) & (rank < lo + width) & ~covered[s])[0]
+    while True:
+        sel = coverage_kernel.round_pairs(order, start, covered, lo, width)
         if len(sel) == 0:
             break
         clear = sel[samples.turbine.line_of_sight(positions[p[sel]], P[s[sel]])]
@@ -163,6 +160,7 @@ def _evaluate(samples: SurfaceSamples, half_size: np.ndarray | None, camera: Cam
     return covered, best, near, firm
 
 
+_SAMPLE_FIELDS = [k for k in SurfaceSamples.__dataclass_fields__ if k != "turbine"]
 REFINE_LEVELS = 3  # blade cells at a coverage boundary are cut in 2 x 2 this many times
 
 
@@ -188,10 +186,9 @@ class _Cells:
         self.max_dist, self.limit, self.border, self.margins = max_dist, limit, border, margins
         self.shapes = np.array([turbine.blade_grid(k, spacing) for k in range(turbine.n_blades)],
                                float).reshape(-1, 4)
-        self.pool: SurfaceSamples | None = None
-        self.half = np.zeros(0)
-        self.covered, self.best = np.zeros(0, bool), np.zeros(0)
-        self.near, self.firm, self.seen = np.zeros(0, bool), np.zeros(0, bool), np.zeros(0, np.int64)
+        # The samples' fields and states, in arrays grown by doubling (``pool``, ``covered`` ...
+        # are views of their first ``n`` rows).
+        self.n, self.buf = 0, {}
         self.keys, self.at = np.zeros(0, np.int64), np.zeros(0, np.int64)  # sorted; -1: buried
         self.pos, self.rot = np.zeros((0, 3)), np.zeros((0, 3, 3))
         self.photo: dict[bytes, int] = {}
@@ -204,23 +201,44 @@ class _Cells:
         self.wide = min(limit + float(np.max(self.pool.turn_deg[b], initial=0.0))
                         + float(np.degrees(np.max(self.half[b], initial=0.0) / 1.0)), 89.9)
 
+    _STATE = {"half": (float, 0.0), "covered": (bool, False), "best": (float, np.inf),
+              "near": (bool, False), "firm": (bool, False), "seen": (np.int64, 0)}
+
+    @property
+    def pool(self) -> SurfaceSamples:
+        return SurfaceSamples(**{k: self.buf[k][:self.n] for k in _SAMPLE_FIELDS}, turbine=self.turbine)
+
+    def __getattr__(self, name: str) -> np.ndarray:  # half, covered, best, near, firm, seen
+        if name in _Cells._STATE and "buf" in self.__dict__:
+            return self.buf[name][:self.n]
+        raise AttributeError(name)
+
     def _add(self, smp: SurfaceSamples) -> np.ndarray:
         """Append samples to the pool; their indices. Blade cells are registered by key."""
-        first = len(self.half)
-        half = np.zeros(len(smp))
+        first, m = self.n, len(smp)
+        half = np.zeros(m)
         on = smp.blade >= 0
         if on.any():
             r, _, s0, s1 = self.shapes[smp.blade[on]].T
             h = (s1 - s0) / (r * 2.0 ** smp.level[on])
             half[on] = 0.5 * np.hypot(h, smp.area[on] / h)
-        self.pool = SurfaceSamples.concatenate([self.pool, smp]) if first else smp
-        self.half = np.concatenate([self.half, half])
-        self.covered = np.concatenate([self.covered, np.zeros(len(smp), bool)])
-        self.best = np.concatenate([self.best, np.full(len(smp), np.inf)])
-        self.near = np.concatenate([self.near, np.zeros(len(smp), bool)])
-        self.firm = np.concatenate([self.firm, np.zeros(len(smp), bool)])
-        self.seen = np.concatenate([self.seen, np.zeros(len(smp), np.int64)])
-        idx = np.arange(first, first + len(smp))
+        new = {k: getattr(smp, k) for k in _SAMPLE_FIELDS}
+        new["half"] = half
+        for k, (dtype, fill) in _Cells._STATE.items():
+            if k != "half":
+                new[k] = np.full(m, fill, dtype)
+        cap = len(self.buf["points"]) if self.buf else 0
+        if first + m > cap:
+            cap = max(2 * cap, first + m)
+            for k, v in new.items():
+                grown = np.empty((cap,) + v.shape[1:], v.dtype)
+                if first:
+                    grown[:first] = self.buf[k][:first]
+                self.buf[k] = grown
+        for k, v in new.items():
+            self.buf[k][first:first + m] = v
+        self.n = first + m
+        idx = np.arange(first, first + m)
         self._register(_cell_key(smp.blade[on], smp.level[on], smp.row[on], smp.col[on]), idx[on])
         return idx
 
@@ -270,7 +288,7 @@ class _Cells:
                 False, False, False, np.inf, 0
             # The rest were measured against the first ``seen`` photos; of those, the kept ones
             # stay first, in the same order.
-            self.seen = np.r_[0, np.cumsum(kept)][self.seen]
+            self.seen[:] = np.r_[0, np.cumsum(kept)][self.seen]
             self.pos, self.rot = self.pos[kept], self.rot[kept]
             self.photo = {r: i for i, r in enumerate(r for r, k in zip(self.photo, kept) if k)}
         new = []

@@ -204,3 +204,66 @@ def _grow_float(a: np.ndarray, size: int) -> np.ndarray:
     for i in range(a.shape[0]):
         b[i] = a[i]
     return b
+
+
+@_jit
+def incidence_flags(s: np.ndarray, dist: np.ndarray, facing: np.ndarray, turn: np.ndarray,
+                    half: np.ndarray, limit: float, near: np.ndarray, firm: np.ndarray) -> np.ndarray:
+    """``coverage._evaluate``'s marginal test for pairs found up to a wider incidence: sets
+    ``near[s]`` where the limit is within the cell's margin of the pair's incidence and
+    ``firm[s]`` where the whole cell is within the limit (margin: half the normal's turn across
+    the cell plus the angle its half size spans at that distance); True for the pairs within
+    the limit itself."""
+    deg = 180.0 / math.pi
+    inside = np.zeros(s.shape[0], np.bool_)
+    for k in range(s.shape[0]):
+        i = s[k]
+        inc = math.acos(min(max(facing[k], -1.0), 1.0)) * deg
+        margin = turn[i] / 2 + half[i] / max(dist[k], 1e-9) * deg
+        if abs(inc - limit) <= margin:
+            near[i] = True
+        if inc <= limit - margin:
+            firm[i] = True
+        inside[k] = inc <= limit
+    return inside
+
+
+@_jit
+def by_sample(s: np.ndarray, g: np.ndarray, m: int) -> tuple:
+    """(order, start): the pairs grouped by sample, sample i's at order[start[i]:start[i + 1]],
+    finest GSD first, ties in the order given (as ``np.lexsort((g, s))``)."""
+    start = np.zeros(m + 1, np.int64)
+    for k in range(s.shape[0]):
+        start[s[k] + 1] += 1
+    for i in range(m):
+        start[i + 1] += start[i]
+    fill = start[:-1].copy()
+    order = np.empty(s.shape[0], np.int64)
+    for k in range(s.shape[0]):
+        i = s[k]
+        j = fill[i]
+        while j > start[i] and g[order[j - 1]] > g[k]:  # a sample has a few pairs: insertion
+            order[j] = order[j - 1]
+            j -= 1
+        order[j] = k
+        fill[i] += 1
+    return order, start
+
+
+@_jit
+def round_pairs(order: np.ndarray, start: np.ndarray, covered: np.ndarray, lo: int,
+                width: int) -> np.ndarray:
+    """The pairs of tracing round (lo, width): each sample not yet covered, its pairs ranked
+    lo .. lo + width - 1 (``by_sample``'s order), sample by sample."""
+    n = 0
+    for i in range(start.shape[0] - 1):
+        if not covered[i]:
+            n += max(0, min(start[i] + lo + width, start[i + 1]) - (start[i] + lo))
+    out = np.empty(n, np.int64)
+    n = 0
+    for i in range(start.shape[0] - 1):
+        if not covered[i]:
+            for k in range(start[i] + lo, min(start[i] + lo + width, start[i + 1])):
+                out[n] = order[k]
+                n += 1
+    return out

@@ -496,7 +496,14 @@ class Turbine:
         uniq, inv = np.unique(row, return_inverse=True)
         fu = (s_start + (uniq + 0.5) * h - s0) / (s1 - s0)
         Au, Bu = self.blade_semi_axes(fu)
-        grid, cumn, total = _side_tables(Bu / Au)
+        # The arc-length tables of each row, made once per turbine: every blade has the same
+        # sections, and the refinement asks for the same rows again and again.
+        memo = self._cache.setdefault(("side_tables", float(spacing), int(level)), {})
+        todo = [i for i, r in enumerate(uniq.tolist()) if r not in memo]
+        if todo:
+            for r, *tables in zip(uniq[todo].tolist(), *_side_tables(Bu[todo] / Au[todo])):
+                memo[r] = tables
+        grid, cumn, total = (np.stack(t) for t in zip(*(memo[r] for r in uniq.tolist())))
         table = inv * 4 + side
         keys = cumn.reshape(-1, cumn.shape[-1]) + 2.0 * np.arange(len(uniq) * 4)[:, None]
         psi = np.interp((col % nc + 0.5) / nc + 2.0 * table, keys.ravel(),
