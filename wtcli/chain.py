@@ -49,8 +49,13 @@ def photo_input(path: str | Path, area_threshold: float | None = None,
     contours or the error that stopped them; the photo as overlay background) and the instances.
     An unreadable file is an InputError. ``fast``: one pass of the network, without the mirror
     pass and the second look (``segment --no-flip --no-zoom``; ``plan --fast``)."""
+    from wtcli.segment import cvnet
     from wtcli.segment.batch import read_image
-    from wtcli.segment.infer import segment_image  # torch: loaded only when a photo is given
+
+    if cvnet.chosen():  # the shipped network without importing torch (1-1.5 s of a plan)
+        segment_image = cvnet.segment_image
+    else:
+        from wtcli.segment.infer import segment_image  # torch: loaded only when a photo is given
 
     path = Path(path)
     thr = area_threshold_px(area_threshold)

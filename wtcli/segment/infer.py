@@ -25,33 +25,16 @@ from wtcli.segment.model import (backbone_in_bf16, build_model, load_weights, pi
 from torchvision.models.detection.image_list import ImageList  # noqa: I001
 from torchvision.ops import boxes as box_ops
 
-from wtcli.errors import InputError
-from wtcli.masks import LABELS, Instances
-from wtcli.segment.bgr import as_bgr
+from wtcli.masks import Instances
+from wtcli.segment import post
 from wtcli.segment.data import image_tensor
 from wtcli.segment.defaults import CANDIDATE_FLOOR, DEFAULT_MAX_SIZE, DEFAULT_SCORE_THRESHOLD
+# shared with the torch-free path (wtcli.segment.cvnet); the names stay importable from here
+from wtcli.segment.post import (DUPLICATE_INSIDE, MASK_OFFSET_PX, MASK_THRESHOLD,  # noqa: F401
+                                MIRROR_BOX_SHIFT_PX, SMALL_TURBINE, ZOOM_MAX, ZOOM_MIN_CROP, ZOOM_PAD,
+                                _turbine_groups, drop_duplicate_blades, instances, paste_mask,
+                                working_image)
 
-MASK_OFFSET_PX = 0.5  # see paste_mask; weights trained with area-resized masks
-MIRROR_BOX_SHIFT_PX = 0.5  # see unmirror_boxes
-# Where each class's soft mask is cut. Blades at 0.45: on 200 development renders (seeds
-# 7 000 000 +, an earlier model) blade IoU 0.742 against 0.735 at 0.5 (0.737 at 0.4, 0.715 at 0.55): the
-# soft edge of a blade a few pixels wide comes out a little below 0.5. Tower and nacelle peak
-# at 0.5.
-MASK_THRESHOLD = {"blade": 0.45, "tower": 0.5, "nacelle": 0.5}
-DUPLICATE_INSIDE = 0.3  # a blade this much inside a better-scored blade is the same blade
-# Second look (``second_look``): a turbine whose detections span less than this share of the
-# frame is segmented again on a crop around it, padded by ZOOM_PAD of its size on each side.
-SMALL_TURBINE = 0.5
-ZOOM_PAD = 0.6
-# ... but the crop is at least ZOOM_MIN_CROP of the frame's height: a turbine a few dozen pixels
-# tall, magnified 5-10x to the network's size, is blurrier than anything it was trained on, and
-# its faint blades were missed. On 100 development renders (an earlier model, refined) blade IoU /
-# AP50 with no floor, 0.3, 0.45, 0.6, 0.7, 0.76 of the frame: 0.836 / 0.762, 0.837 / 0.776,
-# 0.840 / 0.780, 0.844 / 0.798, 0.845 / 0.789, 0.846 / 0.789 (a floor of 0.85 with crops allowed
-# up to 0.9: 0.847 / 0.768, nacelle IoU 0.826 -> 0.819); the 38 real photos' blade IoU 0.753 ->
-# 0.754 (0.7), tower 0.802 -> 0.804. Each look costs one pass whatever the crop's size.
-ZOOM_MIN_CROP = 0.75
-ZOOM_MAX = 3  # the largest this many small turbines (each look costs a pass of the network)
 
 _CACHE: dict[tuple, torch.nn.Module] = {}
 _LOCK = threading.Lock()
@@ -94,72 +77,14 @@ def predict(model: torch.nn.Module, image_bgr: np.ndarray, score_threshold: floa
     ``flip``: detect the photo and its mirror image together (``_detect_both``); about 2 x
     the time. On 300 development renders (an earlier model, second look) blade / tower /
     nacelle IoU 0.757 / 0.855 / 0.768 without -> 0.774 / 0.867 / 0.778 with."""
-    img = as_bgr(image_bgr)
-    if not 0.0 <= score_threshold <= 1.0:
-        raise InputError(f"expected a score threshold in [0, 1], got {score_threshold}")
-    H, W = img.shape[:2]
-    if H < 8 or W < 8:
-        raise InputError(f"image is too small ({W}x{H})")
-    scale = 1.0
-    if max_size and max(H, W) > max_size:
-        scale = max_size / max(H, W)
-        img = cv2.resize(img, (max(1, round(W * scale)), max(1, round(H * scale))),
-                         interpolation=cv2.INTER_AREA)
+    img, H, W = working_image(image_bgr, score_threshold, max_size)
     dev = _device_of(model) if device is None else torch.device(device)
     model.eval()
     with torch.inference_mode():
-        det, (hw, ww) = _detect(model, image_tensor(img).to(dev), flip)
-    scores = det["scores"].float().cpu().numpy()
-    keep = scores >= score_threshold
-    if not keep.any():
-        return Instances.empty(H, W)
-    labels = det["labels"].cpu().numpy()[keep]
-    soft = det["masks"][keep, 0].float().cpu().numpy()  # [N, M, M] in each box
-    work_boxes = det["boxes"].float().cpu().numpy()[keep]
-    sx, sy = W / ww, H / hw  # working size -> original image
-    boxes = work_boxes * np.array([sx, sy, sx, sy])
-    masks = np.zeros((len(soft), H, W), bool)
-    offset = float(getattr(model, "mask_offset_px", MASK_OFFSET_PX))
-    names = np.array([LABELS[int(c) - 1] for c in labels], dtype=object)
-    for i, m in enumerate(soft):
-        paste_mask(masks[i], m, work_boxes[i], sx, sy, offset, MASK_THRESHOLD[names[i]])
-    boxes[:, [0, 2]] = boxes[:, [0, 2]].clip(0, W)
-    boxes[:, [1, 3]] = boxes[:, [1, 3]].clip(0, H)
-    return drop_duplicate_blades(Instances(names, masks, scores[keep].clip(0, 1), boxes))
-
-
-def drop_duplicate_blades(inst: Instances, inside: float = DUPLICATE_INSIDE) -> Instances:
-    """Drop a blade detection whose mask lies ``inside`` (share of its pixels) or more within a
-    better-scored blade's: the network sometimes proposes a blade twice (whole and a part, two
-    overlapping boxes) that box NMS keeps, and each copy would count as a blade. Distinct blades
-    share only a few pixels at the hub (seen from the side, the hidden one's mask is its visible
-    part). Greedy by score, so the result at any score threshold is this one, thresholded."""
-    idx = np.nonzero(inst.labels == "blade")[0]
-    if len(idx) < 2:
-        return inst
-    idx = idx[np.argsort(-inst.scores[idx], kind="stable")]
-    area = inst.masks[idx].reshape(len(idx), -1).sum(axis=1)
-    kept: list[int] = []
-    drop = []
-    for a, i in enumerate(idx):
-        x0, y0, x1, y1 = inst.boxes[i]
-        dup = area[a] == 0
-        for b in kept:
-            if dup:
-                break
-            j = idx[b]  # the masks can overlap only where the boxes do
-            u0, v0 = int(max(x0, inst.boxes[j][0])), int(max(y0, inst.boxes[j][1]))
-            u1, v1 = int(np.ceil(min(x1, inst.boxes[j][2]))), int(np.ceil(min(y1, inst.boxes[j][3])))
-            if u1 > u0 and v1 > v0:
-                both = inst.masks[i, v0:v1, u0:u1] & inst.masks[j, v0:v1, u0:u1]
-                dup = int(both.sum()) >= inside * area[a]
-        if dup:
-            drop.append(i)
-        else:
-            kept.append(a)
-    if not drop:
-        return inst
-    return inst[np.setdiff1d(np.arange(len(inst)), drop)]
+        det, hw = _detect(model, image_tensor(img).to(dev), flip)
+    return instances(det["scores"].float().cpu().numpy(), det["labels"].cpu().numpy(),
+                     det["masks"][:, 0].float().cpu().numpy(), det["boxes"].float().cpu().numpy(),
+                     hw, H, W, score_threshold, float(getattr(model, "mask_offset_px", MASK_OFFSET_PX)))
 
 
 def _detect(model, x: torch.Tensor, flip: bool = False) -> tuple[dict, tuple[int, int]]:
@@ -261,110 +186,15 @@ def _mask_probs(model, feats: dict, boxes: torch.Tensor, labels: torch.Tensor, s
     return logits[torch.arange(len(labels), device=labels.device), labels].float().sigmoid()
 
 
-def paste_mask(out: np.ndarray, soft: np.ndarray, box, sx: float, sy: float,
-               offset: float = MASK_OFFSET_PX, threshold: float = 0.5) -> None:
-    """Threshold the M x M mask ``soft`` of ``box`` (working-size pixels) at ``threshold``
-    into ``out`` (bool, original image size; ``sx, sy`` = original / working size).
-
-    Cell i of a box [x1, x2) is centred at x1 + offset + (i + 0.5) (x2 - x1) / M (pixel edges
-    at integers). Training targets come from torchvision's ``project_masks_on_boxes``
-    (RoIAlign, aligned=False), whose cells sit half a pixel right of the box's own frame:
-    offset 0.5, when the masks were resized by area (``model._Transform``). torchvision's
-    ``paste_masks_in_image`` ignores that and widens the box by a pixel: on TRUE masks at
-    640x480 its round trip keeps blade IoU 0.77, this one 0.93 (thin blades are a few pixels
-    wide)."""
-    M = soft.shape[-1]
-    H, W = out.shape
-    x1, y1, x2, y2 = (float(v) for v in box)
-    X0, Y0 = max(int(np.floor(x1 * sx)), 0), max(int(np.floor(y1 * sy)), 0)
-    X1, Y1 = min(int(np.ceil(x2 * sx)), W), min(int(np.ceil(y2 * sy)), H)
-    if X1 <= X0 or Y1 <= Y0:
-        return
-    # cell i's centre in original pixel-index units (pixel centres at integers)
-    ax, ay = (x2 - x1) / M * sx, (y2 - y1) / M * sy
-    bx = (x1 + offset + 0.5 * (x2 - x1) / M) * sx - 0.5 - X0
-    by = (y1 + offset + 0.5 * (y2 - y1) / M) * sy - 0.5 - Y0
-    A = np.array([[ax, 0, bx], [0, ay, by]], np.float64)
-    region = cv2.warpAffine(soft.astype(np.float32), A, (X1 - X0, Y1 - Y0), flags=cv2.INTER_LINEAR,
-                            borderMode=cv2.BORDER_REPLICATE)
-    out[Y0:Y1, X0:X1] |= region >= threshold
-
-
-def _turbine_groups(boxes: np.ndarray, grow: float = 0.25) -> list[np.ndarray]:
-    """Indices of the detections of each turbine: boxes that overlap once each is grown by
-    ``grow`` of its size per side (blades meet at the hub, the tower under the nacelle)."""
-    w = (boxes[:, 2] - boxes[:, 0]) * grow
-    h = (boxes[:, 3] - boxes[:, 1]) * grow
-    lo, hi = boxes[:, :2] - np.c_[w, h], boxes[:, 2:] + np.c_[w, h]
-    touch = ((lo[:, None] <= hi[None]) & (lo[None] <= hi[:, None])).all(axis=2)
-    group = np.arange(len(boxes))
-    for _ in range(len(boxes)):  # label propagation: each takes the least label it touches
-        new = np.where(touch, group[None, :], len(boxes)).min(axis=1)
-        if (new == group).all():
-            break
-        group = new
-    return [np.nonzero(group == g)[0] for g in np.unique(group)]
 
 
 def second_look(model: torch.nn.Module, image_bgr: np.ndarray, inst: Instances,
                 score_threshold: float, max_size: int | None = DEFAULT_MAX_SIZE,
                 flip: bool = True) -> Instances:
-    """Segment each small turbine again on a crop around it, and use those instances instead.
-
-    The network works at 576 px high: a distant turbine's blades are then 1-3 px wide and come
-    out too thin, or not at all. Cropped with its surroundings (ZOOM_PAD of its size each side,
-    at least ZOOM_MIN_CROP of the frame's height, the frame's aspect), it is seen larger, though
-    not blurrier than in training (figures: docs/segment.md).
-    The crop's detections that meet the turbine's box replace the first pass's of it, except
-    those cut by the crop's edge (not the photo's); if none is left, the first pass's stand.
-    The ZOOM_MAX largest small turbines are looked at again."""
-    if not len(inst):
-        return inst
-    img = np.asarray(image_bgr)
-    H, W = img.shape[:2]
-    keep = np.ones(len(inst), bool)
-    small = []
-    for g in _turbine_groups(inst.boxes):
-        x0, y0 = inst.boxes[g, :2].min(axis=0)
-        x1, y1 = inst.boxes[g, 2:].max(axis=0)
-        if max((y1 - y0) / H, (x1 - x0) / W) < SMALL_TURBINE:
-            small.append((-(y1 - y0) * (x1 - x0), g, x0, y0, x1, y1))
-    small.sort(key=lambda c: c[0])
-    labels, masks, scores, boxes = [], [], [], []
-    for _, g, x0, y0, x1, y1 in small[:ZOOM_MAX]:
-        ch = max(max(y1 - y0, (x1 - x0) * H / W) * (1 + 2 * ZOOM_PAD), ZOOM_MIN_CROP * H)
-        if ch >= 0.8 * H or ch < 16:  # hardly a closer look, or a photo too small to crop
-            continue
-        cw = ch * W / H
-        X0 = int(round(np.clip((x0 + x1 - cw) / 2, 0, W - cw)))
-        Y0 = int(round(np.clip((y0 + y1 - ch) / 2, 0, H - ch)))
-        X1, Y1 = min(W, X0 + int(round(cw))), min(H, Y0 + int(round(ch)))
-        sub = predict(model, img[Y0:Y1, X0:X1], score_threshold, max_size, flip=flip)
-        b = sub.boxes
-        cut = (((b[:, 0] <= 1) & (X0 > 0)) | ((b[:, 1] <= 1) & (Y0 > 0))
-               | ((b[:, 2] >= X1 - X0 - 1) & (X1 < W)) | ((b[:, 3] >= Y1 - Y0 - 1) & (Y1 < H)))
-        # Only this turbine's: a detection meeting its box (a blade missed before starts at
-        # its hub); a neighbour in the crop keeps its own detections.
-        b = b + (X0, Y0, X0, Y0)
-        mine = ~cut & (b[:, 0] <= x1) & (b[:, 2] >= x0) & (b[:, 1] <= y1) & (b[:, 3] >= y0)
-        if not mine.any():  # the closer look found nothing of it: the first look stands
-            continue
-        keep[g] = False
-        m = np.zeros((int(mine.sum()), H, W), bool)
-        m[:, Y0:Y1, X0:X1] = sub.masks[mine]
-        labels.append(sub.labels[mine])
-        masks.append(m)
-        scores.append(sub.scores[mine])
-        boxes.append(b[mine])
-    if not labels:
-        return inst
-    labels, masks = [inst.labels[keep]] + labels, [inst.masks[keep]] + masks
-    scores, boxes = [inst.scores[keep]] + scores, [inst.boxes[keep]] + boxes
-    scores_a = np.concatenate(scores)
-    order = np.argsort(-scores_a, kind="stable")  # as predict's: best first
-    return drop_duplicate_blades(Instances(np.concatenate(labels)[order], np.concatenate(masks)[order],
-                                           scores_a[order], np.concatenate(boxes)[order]))
-
+    """``post.second_look`` with this network's ``predict``: each small turbine segmented
+    again on a crop around it (figures: docs/segment.md)."""
+    return post.second_look(lambda img, thr, ms, fl: predict(model, img, thr, ms, flip=fl),
+                            image_bgr, inst, score_threshold, max_size, flip)
 
 def segment_image(image_bgr: np.ndarray, model: torch.nn.Module | None = None,
                   score_threshold: float = DEFAULT_SCORE_THRESHOLD, max_size: int | None = DEFAULT_MAX_SIZE,
