@@ -129,3 +129,29 @@ def test_plan_from_a_photo_imports_no_torch(tmp_path):
     got = json.loads(done.stdout.strip().splitlines()[-1])
     assert got == {"code": 0, "torch": False}, done.stderr[-2000:]
     assert "from sample_images/images/00000.jpg" in done.stderr or "00000.jpg" in done.stderr
+
+
+def test_plan_segments_a_photo_once_by_default_and_four_times_full(cli, tmp_path, monkeypatch):
+    """`plan`'s --fast (the default): one pass of the network; --full: the photo and its mirror,
+    twice (the sample photo's turbine is small enough for a second look)."""
+    import yaml
+
+    doc = yaml.safe_load((ROOT / "sample_images" / "turbines.yaml").read_text())
+    doc["turbines"] = doc["turbines"][:1]
+    site = tmp_path / "t1.yaml"
+    site.write_text(yaml.safe_dump(doc))
+    monkeypatch.setenv("WTINSPECT_SEGMENTER", "cv2")
+    calls = []
+    detect = cvnet.CvModel.detect
+    monkeypatch.setattr(cvnet.CvModel, "detect",
+                        lambda self, img, flip: calls.append(flip) or detect(self, img, flip))
+    photo = f"T1={ROOT / 'sample_images' / 'images' / '00000.jpg'}"
+    azimuths = []
+    for flags, want in (([], [False]), (["--full"], [True, True])):
+        calls.clear()
+        res = cli("plan", site, photo, "--out", tmp_path / "plan.json", *flags)
+        assert res.exit_code == 0, res.stderr
+        assert calls == want
+        line = next(x for x in res.stderr.splitlines() if "blade azimuths" in x)
+        azimuths.append(sorted(float(a) for a in line.split("azimuths ")[1].split(" deg")[0].split(", ")))
+    assert max(abs((a - b + 180) % 360 - 180) for a, b in zip(*azimuths)) < 0.5

@@ -63,10 +63,11 @@ def register(app: typer.Typer) -> None:
                  "the photo's own GPS and gimbal tags where it has them (docs/photo-pose.md), "
                  "else at S_p looking at the rotor centre."),
         fast: bool = typer.Option(
-            False, "--fast",
-            help="Photos: one pass of the segmenter, without the mirror pass and the second look "
-                 "at a distant turbine (segment --no-flip --no-zoom): about a second sooner on 2 "
-                 "cores, blade angles a little less sure (docs/plan.md)."),
+            True, "--fast/--full",
+            help="Photos: one pass of the segmenter (--fast, the default), or --full: also the "
+                 "mirror pass and a second look at a distant turbine (segment's default), four "
+                 "passes, about a second later on 2 cores; on 40 held-out renders both read the "
+                 "blade angles as well (docs/plan.md)."),
         json_out: bool = typer.Option(False, "--json", help="Print the plan JSON on stdout."),
         jobs: Optional[int] = typer.Option(
             None, "--jobs", "-j", min=1,
