@@ -160,6 +160,7 @@ def _evaluate(samples: SurfaceSamples, half_size: np.ndarray | None, camera: Cam
     return covered, best, near, firm
 
 
+BURIED = 2  # the refinement's state of a cell whose middle lies inside another part
 _SAMPLE_FIELDS = [k for k in SurfaceSamples.__dataclass_fields__ if k != "turbine"]
 REFINE_LEVELS = 3  # blade cells at a coverage boundary are cut in 2 x 2 this many times
 
@@ -258,8 +259,8 @@ class _Cells:
         return self.blocks["structure"]
 
     def cells(self, k: int, level: int, row: np.ndarray, col: np.ndarray) -> np.ndarray:
-        """Pool indices of blade k's cells (row, col) at ``level``, made where new; cells buried
-        in another part have none and are left out."""
+        """Pool indices of blade k's cells (row, col) at ``level``, made where new; -1 for cells
+        buried in another part (they have no sample)."""
         keys = _cell_key(np.full(len(row), k), np.full(len(row), level), row, col)
         idx, found = self._find(keys)
         if not found.all():
@@ -269,7 +270,7 @@ class _Cells:
             made = np.isin(keys[miss], _cell_key(smp.blade, smp.level, smp.row, smp.col))
             self._register(keys[miss][~made], np.full(int((~made).sum()), -1, np.int64))
             idx, _ = self._find(keys)
-        return idx[idx >= 0]
+        return idx
 
     def use(self, positions: np.ndarray, rotations: np.ndarray) -> None:
         """Make the photo set these photos: new ones are added; where one measured before is
@@ -373,19 +374,29 @@ def turbine_coverage(turbine: Turbine, camera: Camera, positions: np.ndarray,
     if L <= 0 or parts == "structure" or not len(positions):
         return result(base_idx)
     pool = store.pool
-    # Per blade, the finest grid: the state of the leaf cell over each fine cell (-1 none:
-    # buried, or nothing sampled) and that leaf's level.
+    # Per blade, the finest grid: the state of the leaf cell over each fine cell (0 missed,
+    # 1 covered, BURIED: its middle lies inside another part, so it has no sample; -1 none yet)
+    # and that leaf's level. Where the blade runs into the hub or the nacelle the line between
+    # buried and sampled cells is a boundary like any other: a cell it crosses counts whole or
+    # not at all by its middle, so those cells are cut too.
     shapes = store.shapes.astype(np.int64)
     state = [np.full((r << L, (4 * n) << L), -1, np.int8) for r, n, _, _ in shapes]
     owner = [np.full(st.shape, L, np.int8) for st in state]
     chunks = [base_idx]
     split: list[np.ndarray] = []  # keys of the cells cut (no longer leaves)
 
-    def paint(idx: np.ndarray) -> dict[int, np.ndarray]:
-        """The leaves ``idx`` onto their blades' grids; per blade their (level, row, col)."""
+    def paint(idx: np.ndarray, buried: dict[int, list[np.ndarray]]) -> dict[int, np.ndarray]:
+        """The leaves ``idx`` and the buried leaves (per blade, (level, row, col) arrays) onto
+        their blades' grids; per blade all their (level, row, col)."""
         pool = store.pool
         blade, level, row, col = pool.blade[idx], pool.level[idx], pool.row[idx], pool.col[idx]
-        covered = store.covered[idx]
+        covered = store.covered[idx].astype(np.int8)
+        if buried:
+            bk = np.concatenate([np.full(len(u), k) for k, us in buried.items() for u in us])
+            bu = np.concatenate([u for us in buried.values() for u in us]).reshape(-1, 3)
+            blade = np.concatenate([blade, bk]).astype(np.int64)
+            level, row, col = (np.concatenate([a, bu[:, c]]) for c, a in enumerate((level, row, col)))
+            covered = np.concatenate([covered, np.full(len(bk), BURIED, np.int8)])
         out = {}
         for k in np.unique(blade[blade >= 0]):
             mk = blade == k
@@ -401,7 +412,14 @@ def turbine_coverage(turbine: Turbine, camera: Camera, positions: np.ndarray,
 
     from wtcli.geometry import coverage_kernel
 
-    painted = paint(base_idx)
+    painted = paint(base_idx, {})
+    for k, st in enumerate(state):  # the base cells without a sample: buried
+        i, j = np.nonzero(st < 0)
+        if len(i):
+            u = np.unique(np.stack([np.zeros(len(i), np.int64), i >> L, j >> L], axis=1), axis=0)
+            st[st < 0] = BURIED
+            owner[k][st == BURIED] = 0
+            painted[k] = np.concatenate([painted.get(k, np.zeros((0, 3), np.int64)), u])
     flagged = base_idx
     while True:
         todo = []  # (blade, level, row, col) of the leaves to cut
@@ -425,6 +443,7 @@ def turbine_coverage(turbine: Turbine, camera: Camera, positions: np.ndarray,
         for k, u in todo:
             by_blade.setdefault(k, []).append(u)
         new = []
+        buried: dict[int, list[np.ndarray]] = {}
         for k, us in by_blade.items():
             u = np.unique(np.concatenate(us), axis=0)
             lv, i, j = u[:, 0], u[:, 1], u[:, 2]
@@ -440,10 +459,15 @@ def turbine_coverage(turbine: Turbine, camera: Camera, positions: np.ndarray,
                 m = lv == l0
                 ci = (2 * i[m])[:, None] + np.array([0, 0, 1, 1])
                 cj = (2 * j[m])[:, None] + np.array([0, 1, 0, 1])
-                new.append(store.cells(k, int(l0) + 1, ci.ravel(), cj.ravel()))
+                got = store.cells(k, int(l0) + 1, ci.ravel(), cj.ravel())
+                new.append(got[got >= 0])
+                gone = got < 0
+                if gone.any():
+                    buried.setdefault(k, []).append(np.stack(
+                        [np.full(int(gone.sum()), l0 + 1), ci.ravel()[gone], cj.ravel()[gone]], axis=1))
         idx = np.concatenate(new)
         store.measure(idx)
-        painted = paint(idx)
+        painted = paint(idx, buried)
         chunks.append(idx)
         flagged = idx
     if not split:
