@@ -524,8 +524,19 @@ class Turbine:
         # Where the root runs into another part (its trailing edge into the nacelle's front face,
         # which sits less than a root semi-chord behind the rotor plane), that stretch is inside
         # the turbine, not on its outer surface: no camera can see it, so it is not sampled.
-        others = [j for j in range(len(self.part_names())) if j != k]
-        buried = self.clearance_by_part(out["points"], cap=1e-6)[:, others].min(axis=1) <= 0.0
+        # (``clearance_by_part(points, cap=1e-6)`` without blade k's column: its own surface's
+        # exact distance, the costliest column, is not needed)
+        P = out["points"]
+        blades, local, bound = self._blade_bounds(P)
+        bound[:, k] = np.inf
+        self._blade_exact(blades, local, bound < 1e-6)
+        blades[:, k] = np.inf
+        tower = self._tower_bound(P)
+        near_t = tower < 1e-6
+        if near_t.any():
+            tower[near_t] = self._tower_distance(P[near_t])
+        buried = np.minimum.reduce([blades.min(axis=1), tower, self._nacelle_distance(P),
+                                    self._hub_distance(P)]) <= 0.0
         return SurfaceSamples(**{key: v[~buried] for key, v in out.items()}, turbine=self)
 
     def _blade_samples(self, k: int, spacing: float) -> dict[str, np.ndarray]:
