@@ -158,6 +158,46 @@ def run_synth(n: int, seed: int, width: int, height: int) -> dict:
             "ms_per_image": 1000 * secs / max(1, done - len(failures))}
 
 
+PARTIAL_VIEWS = ("cut", "closeup", "hub")
+
+
+def run_partial(n: int, seed: int, width: int, height: int, view: str) -> dict:
+    """Partial rotors (``wtcli.synth.views``): ``cut`` frames whose edge cuts the nacelle, the
+    hub or a blade's end, ``closeup`` one blade filling the frame, ``hub`` the hub from close
+    by. On their ground-truth masks, any blade count: each blade of the inspected turbine whose
+    direction is reported is checked against the truth (flipped: φ off by more than 90°); a
+    blade whose hub could not be placed counts as unknown (``direction_known`` false: its sense
+    is not guessed, and `plan` refuses it)."""
+    from wtcli.synth.render import render_sample
+
+    blades = flipped = unknown = other = 0
+    failed, flips = 0, []
+    for i in range(n):
+        s = render_sample(seed + i, width, height, view)
+        truth = s.truth
+        try:
+            res = pitch_from_instances(s.instances, expected_blades=None)
+        except PerceptionError:
+            failed += 1  # no blade measured at all (e.g. a frame of the nacelle alone)
+            continue
+        for b in res.blades:
+            owner = truth["instances"][b.source_index]
+            if owner["turbine"] != 0 or owner.get("blade") is None:
+                other += 1
+                continue
+            blades += 1
+            if not b.direction_known:
+                unknown += 1
+                continue
+            gt = truth["blades"][owner["blade"]]
+            if angle_err(np.array([b.phi_deg]), np.array([gt["phi_deg"]]), 360.0)[0] > 90:
+                flipped += 1
+                flips.append(seed + i)
+    return {"view": view, "renders": n, "seed": seed, "blades": blades, "flipped": flipped,
+            "unknown": unknown, "no_blade_measured": failed, "other_turbines_blades": other,
+            "flipped_seeds": flips[:10]}
+
+
 def run_real(root: Path) -> list[dict]:
     """Real photos (WTA dataset, Zampokas et al., ICUAS 2022) with semantic masks: blade class
     split into connected components, tower class as tower. No per-blade angle truth exists, so
@@ -254,6 +294,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-oblique", action="store_true", help="front views only")
     ap.add_argument("--synth", type=int, default=100, metavar="N",
                     help="also N front views from the synthetic renderer, 640x480 (0: skip)")
+    ap.add_argument("--partial", type=int, default=100, metavar="N",
+                    help="also N renders of each partial-rotor view (cut, closeup, hub), 640x480, "
+                         "seeds from --seed (0: skip)")
     ap.add_argument("--real", default=str(Path(__file__).resolve().parents[2] / "shared" / "real-photos"),
                     help="folder of the real photos with manifest.csv (skipped if absent; '' skips)")
     ap.add_argument("--out", default=None,
@@ -265,7 +308,8 @@ def main(argv: list[str] | None = None) -> int:
     ok = (len(front["theta"]) > 0 and front["failed"] == 0 and front["theta"].mean() <= 0.5
           and front["class_acc"] >= 0.99
           and front["miss_max_dist"] <= 1.0 and front["flipped"] == 0)
-    result: dict = {"front": figures(front), "oblique": None, "synthetic": None, "real": None}
+    result: dict = {"front": figures(front), "oblique": None, "synthetic": None, "partial": None,
+                    "real": None}
     if not a.no_oblique:
         oblique = run(a.n, a.seed + 1, a.width, a.height, oblique=True)
         report("mildly oblique views (10-25° aside, ±10° up/down)", oblique)
@@ -274,6 +318,15 @@ def main(argv: list[str] | None = None) -> int:
         synth = run_synth(a.synth, a.seed, 640, 480)
         report("synthetic renders, front views with distant turbines (640x480)", synth)
         result["synthetic"] = figures(synth)
+    if a.partial:
+        print(f"== partial rotors: ground-truth masks of {a.partial} renders per view, 640x480")
+        result["partial"] = {}
+        for view in PARTIAL_VIEWS:
+            p = run_partial(a.partial, a.seed, 640, 480, view)
+            result["partial"][view] = p
+            print(f"   {view:<8s} {p['blades']} blades of the inspected turbine: {p['flipped']} flipped, "
+                  f"{p['unknown']} direction unknown; {p['no_blade_measured']} renders with no blade "
+                  f"measured")
     real = Path(a.real)
     if a.real and (real / "manifest.csv").exists():
         print(f"== real photos in {real} (semantic masks; WTA dataset, Zampokas et al. 2022)")
@@ -286,7 +339,7 @@ def main(argv: list[str] | None = None) -> int:
           f"of a boundary, φ never flipped: {'MET' if ok else 'NOT MET'} ({seconds:.1f} s in all)")
     result.update(target_met=ok, seconds=seconds,
                   settings={"n": a.n, "seed": a.seed, "width": a.width, "height": a.height,
-                            "synth": a.synth})
+                            "synth": a.synth, "partial": a.partial})
     print(f"written: {save('pitch_accuracy', result, argv=argv, out=a.out)}")
     return 0 if ok else 1
 

@@ -147,6 +147,11 @@ SECTIONS: tuple[Section, ...] = (
          F("renders with distant turbines: θ error mean / p95, blades taken from another turbine",
            ("synthetic.theta_err_deg.mean", "synthetic.theta_err_deg.p95", "synthetic.wrong_rotor"),
            "{:.3f}° / {:.3f}°, {}"),
+         F("partial rotors, 100 renders per view: blades flipped / measured (direction unknown) "
+           "— cut by the frame, close-up, hub",
+           tuple(f"partial.{v}.{k}" for v in ("cut", "closeup", "hub")
+                 for k in ("flipped", "blades", "unknown")),
+           "{} / {} ({}), {} / {} ({}), {} / {} ({})", "none flipped"),
          F("time per image (contours + pitch)", ("front.ms_per_image",), "{:.1f} ms"))),
     Section(
         "Planning time", "plan_benchmark",
