@@ -1,6 +1,6 @@
 """θ and φ accuracy of contours + pitch on ground-truth masks of rendered turbines.
 
-    python benchmarks/pitch_accuracy.py [--n 500] [--seed 0] [--width 1024] [--height 768]
+    python benchmarks/pitch_accuracy.py [--n 500] [--seed 0] [--width 1024] [--height 768] [--partial 100]
 
 Each sample is a random turbine (size, yaw, rotor azimuth) seen through the one geometry
 (``Turbine.with_rotor_azimuth`` + ``Camera.looking_at`` + ``geometry.projection.instance_masks``):
@@ -9,7 +9,10 @@ Each sample is a random turbine (size, yaw, rotor azimuth) seen through the one 
   distance where the rotor diameter fills 40-90 % of the frame height;
 * oblique: the same, moved 10-25° around the hub sideways and up to ±10° up or down;
 * synthetic renders (``wtcli.synth.render.render_sample``, front view, 640x480): their masks
-  include distant turbines, so the main rotor must be picked first.
+  include distant turbines, so the main rotor must be picked first;
+* partial rotors (``--partial N``, 100 by default): N renders each of the ``cut``, ``closeup``
+  and ``hub`` views (``wtcli.synth.views``), 640x480: blades of the inspected turbine whose
+  direction came out flipped, and those reported as unknown (the hub not placed).
 
 Ground truth: φ = ``camera.image_angle_deg(hub_center, tip)``, θ = φ mod 180. Printed: mean,
 95th percentile and max |error| of θ (principal axis, the classified one), θ eq. 7
