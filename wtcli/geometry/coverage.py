@@ -244,9 +244,10 @@ class _Cells:
         return idx
 
     def _register(self, keys: np.ndarray, idx: np.ndarray) -> None:
-        keys, at = np.concatenate([self.keys, keys]), np.concatenate([self.at, idx])
+        """Cells (keys never registered before) at pool indices ``idx`` (-1: buried)."""
         order = np.argsort(keys, kind="stable")
-        self.keys, self.at = keys[order], at[order]
+        where = np.searchsorted(self.keys, keys[order])
+        self.keys, self.at = np.insert(self.keys, where, keys[order]), np.insert(self.at, where, idx[order])
 
     def _find(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         i = np.minimum(np.searchsorted(self.keys, keys), max(len(self.keys) - 1, 0))
@@ -385,6 +386,8 @@ def turbine_coverage(turbine: Turbine, camera: Camera, positions: np.ndarray,
     chunks = [base_idx]
     split: list[np.ndarray] = []  # keys of the cells cut (no longer leaves)
 
+    from wtcli.geometry import coverage_kernel
+
     def paint(idx: np.ndarray, buried: dict[int, list[np.ndarray]]) -> dict[int, np.ndarray]:
         """The leaves ``idx`` and the buried leaves (per blade, (level, row, col) arrays) onto
         their blades' grids; per blade all their (level, row, col)."""
@@ -400,17 +403,10 @@ def turbine_coverage(turbine: Turbine, camera: Camera, positions: np.ndarray,
         out = {}
         for k in np.unique(blade[blade >= 0]):
             mk = blade == k
-            for lv in np.unique(level[mk]):
-                m = mk & (level == lv)
-                b = 1 << (L - int(lv))
-                st, ow = state[k], owner[k]
-                st.reshape(st.shape[0] // b, b, st.shape[1] // b, b)[row[m], :, col[m], :] = \
-                    covered[m][:, None, None]
-                ow.reshape(ow.shape[0] // b, b, ow.shape[1] // b, b)[row[m], :, col[m], :] = lv
-            out[int(k)] = np.stack([level[mk], row[mk], col[mk]], axis=1).astype(np.int64)
+            lv, r, c = (a[mk].astype(np.int64) for a in (level, row, col))
+            coverage_kernel.paint(state[k], owner[k], L, lv, r, c, covered[mk], lv.astype(np.int8))
+            out[int(k)] = np.stack([lv, r, c], axis=1)
         return out
-
-    from wtcli.geometry import coverage_kernel
 
     painted = paint(base_idx, {})
     for k, st in enumerate(state):  # the base cells without a sample: buried
@@ -433,8 +429,8 @@ def turbine_coverage(turbine: Turbine, camera: Camera, positions: np.ndarray,
                                           axis=1).astype(np.int64)))
         # Leaves next to a leaf of the other state (along the span or round the section)
         for k, u in painted.items():
-            cut = coverage_kernel.boundary_leaves(state[k], owner[k], L, u[:, 0].copy(),
-                                                  u[:, 1].copy(), u[:, 2].copy())
+            cut = coverage_kernel.boundary_leaves(state[k], owner[k], L,
+                                                  *(u[:, c].copy() for c in range(3)))
             if len(cut):
                 todo.append((k, cut))
         if not todo:
@@ -445,16 +441,13 @@ def turbine_coverage(turbine: Turbine, camera: Camera, positions: np.ndarray,
         new = []
         buried: dict[int, list[np.ndarray]] = {}
         for k, us in by_blade.items():
-            u = np.unique(np.concatenate(us), axis=0)
-            lv, i, j = u[:, 0], u[:, 1], u[:, 2]
-            split.append(_cell_key(np.full(len(u), k), lv, i, j))
-            for l0 in np.unique(lv):  # the parents' fine cells: nothing until the children say
-                m = lv == l0
-                bb = 1 << (L - int(l0))
-                st = state[k]
-                st.reshape(st.shape[0] // bb, bb, st.shape[1] // bb, bb)[i[m], :, j[m], :] = -1
-                ow = owner[k]
-                ow.reshape(ow.shape[0] // bb, bb, ow.shape[1] // bb, bb)[i[m], :, j[m], :] = l0 + 1
+            u = np.concatenate(us)
+            keys = np.unique(_cell_key(np.full(len(u), k), u[:, 0], u[:, 1], u[:, 2]))
+            split.append(keys)
+            lv, i, j = (keys >> 40) & 15, (keys >> 20) & 0xFFFFF, keys & 0xFFFFF
+            # the parents' fine cells: nothing until the children say
+            coverage_kernel.paint(state[k], owner[k], L, lv, i, j, np.full(len(lv), -1, np.int8),
+                                  (lv + 1).astype(np.int8))
             for l0 in np.unique(lv):
                 m = lv == l0
                 ci = (2 * i[m])[:, None] + np.array([0, 0, 1, 1])

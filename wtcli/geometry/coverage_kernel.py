@@ -267,3 +267,17 @@ def round_pairs(order: np.ndarray, start: np.ndarray, covered: np.ndarray, lo: i
                 out[n] = order[k]
                 n += 1
     return out
+
+
+@_jit
+def paint(state: np.ndarray, owner: np.ndarray, levels: int, level: np.ndarray, row: np.ndarray,
+          col: np.ndarray, value: np.ndarray, own: np.ndarray) -> None:
+    """Set the fine cells of each leaf (level, row, col) of one blade's finest grid: state to
+    ``value`` and owner to ``own`` (``turbine_coverage``'s grids)."""
+    for q in range(level.shape[0]):
+        b = 1 << (levels - level[q])
+        r0, c0 = row[q] * b, col[q] * b
+        for i in range(r0, r0 + b):
+            for j in range(c0, c0 + b):
+                state[i, j] = value[q]
+                owner[i, j] = own[q]

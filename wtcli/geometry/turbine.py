@@ -464,7 +464,7 @@ class Turbine:
         side's arc at ``spacing``, odd, at least ``_SIDE_SAMPLES_MIN``); columns run round the
         section side after side (``BLADE_SIDES`` order). At refinement level l each cell is cut
         in 2 x 2: rows << l by (4 * per_side) << l."""
-        key = ("blade_grid", k, float(spacing))
+        key = ("blade_grid", float(spacing))  # the same for every blade (they share the planform)
         if key not in self._cache:
             s0, s1 = self.blade_root_offset, self.tip_radius
             s_start = max(s0, math.sqrt(max(self.hub_radius ** 2 - (self.blade_root_chord / 2) ** 2, 0)))
