@@ -3,6 +3,13 @@ fixed, non-adaptive pattern that assumes the rotor stopped in a "Y" (blade 1 up)
 real stop angles.
 
     python benchmarks/plan_benchmark.py [--cases 30] [--sizes 1,10,100] [--out results.json]
+    python benchmarks/plan_benchmark.py --coverage-share 10   # only the share below
+
+``--coverage-share N``: one process plans the N-turbine site under cProfile and reports the CPU
+seconds spent in the coverage measure (``turbine_coverage``, the planner's gate, predicted and
+per-turbine figures) and in the gap-view search (``gap_plan``) beside the whole plan's. In one
+process the per-turbine figure reuses the cells the gate measured (in worker processes it
+starts afresh), so the share is a lower bound of a parallel plan's.
 
 Coverage is the planner's prediction (the one coverage measure, wtcli/geometry/coverage.py) at the
 plan's GSD and incidence <= 60 deg, judged against the REAL rotor for both patterns; the fixed
@@ -80,6 +87,36 @@ def timing(sizes: list[int]) -> list[dict]:
     return out
 
 
+def coverage_share(n: int) -> dict:
+    """CPU seconds of one process planning ``site(n)``: in all, in ``turbine_coverage`` and in
+    ``gap_plan`` (cProfile's cumulative times; the numba kernels compiled first)."""
+    import cProfile
+    import pstats
+
+    plan_mission(site(1, np.random.default_rng(1)), workers=1)  # compile / load the kernels
+    m = site(n, np.random.default_rng(n))
+    prof = cProfile.Profile(time.process_time)  # CPU time: wall time counts other processes
+    c0 = time.process_time()
+    prof.enable()
+    plan_mission(m, workers=1)
+    prof.disable()
+    total = time.process_time() - c0
+    st = pstats.Stats(prof).stats  # {(file, line, name): (calls, ..., tottime, cumtime, callers)}
+
+    def cum(name: str) -> tuple[int, float]:
+        hits = [(v[1], v[3]) for (f, _, fn), v in st.items() if fn == name and "wtcli" in f]
+        return (hits[0][0], hits[0][1]) if hits else (0, 0.0)
+
+    calls, cov = cum("turbine_coverage")
+    _, gaps = cum("gap_plan")
+    out = {"turbines": n, "cpu_seconds": round(total, 2), "coverage_calls": calls,
+           "coverage_cpu_seconds": round(cov, 2), "gap_search_cpu_seconds": round(gaps, 2)}
+    print(f"{n} turbines in one process: {total:.2f} CPU s under cProfile; turbine_coverage "
+          f"{cov:.2f} s in {calls} calls ({cov / total:.0%}), gap_plan {gaps:.2f} s "
+          f"({gaps / total:.0%})", flush=True)
+    return out
+
+
 def compare(cases: int) -> dict:
     rng = np.random.default_rng(7)
     rows = []
@@ -131,7 +168,14 @@ def main() -> None:
     ap.add_argument("--cases", type=int, default=30)
     ap.add_argument("--sizes", default="1,10,100")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--coverage-share", type=int, default=None, metavar="N",
+                    help="only: the coverage measure's and the gap search's CPU share of an "
+                         "N-turbine plan in one process (cProfile)")
     a = ap.parse_args()
+    if a.coverage_share:
+        res = coverage_share(a.coverage_share)
+        print(f"wrote {save('plan_benchmark_coverage_share', res, script=__file__)}")
+        return
     res = {"timing": timing([int(x) for x in a.sizes.split(",") if x]),
            "adaptive_vs_fixed_y": compare(a.cases)}
     summary = {k: v for k, v in res["adaptive_vs_fixed_y"].items() if k != "rows"}
