@@ -109,7 +109,7 @@ def _need_turbine(samples: SurfaceSamples) -> None:
                          "samples without one: occlusion cannot be checked")
 
 
-def _evaluate(samples: SurfaceSamples, half_size: np.ndarray | None, camera: Camera,
+def _evaluate(samples: SurfaceSamples | _Part, half_size: np.ndarray | None, camera: Camera,
               positions: np.ndarray, rotations: np.ndarray, max_dist: float, limit: float,
               border: float, wide: float | None = None, best_before: np.ndarray | None = None
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -168,6 +168,18 @@ REFINE_LEVELS = 3  # blade cells at a coverage boundary are cut in 2 x 2 this ma
 def _cell_key(blade: np.ndarray, level: np.ndarray, row: np.ndarray, col: np.ndarray) -> np.ndarray:
     """One int64 per blade cell (blade < 64, level < 16, row and col < 2**20)."""
     return (((blade.astype(np.int64) << 4) + level) << 40) + (row.astype(np.int64) << 20) + col
+
+
+@dataclass(frozen=True)
+class _Part:
+    """What ``_evaluate`` reads of samples (a subset of the pool without copying the rest)."""
+    points: np.ndarray
+    normals: np.ndarray
+    turn_deg: np.ndarray
+    turbine: Turbine
+
+    def __len__(self) -> int:
+        return len(self.points)
 
 
 class _Cells:
@@ -308,7 +320,9 @@ class _Cells:
         idx = idx[self.seen[idx] < K]
         for n0 in np.unique(self.seen[idx]):
             g = idx[self.seen[idx] == n0]
-            c, b, near, firm = _evaluate(self.pool[g], self.half[g] if self.margins else None,
+            part = _Part(self.buf["points"][g], self.buf["normals"][g], self.buf["turn_deg"][g],
+                         self.turbine)
+            c, b, near, firm = _evaluate(part, self.half[g] if self.margins else None,
                                          self.camera, self.pos[n0:], self.rot[n0:], self.max_dist,
                                          self.limit, self.border, self.wide, self.best[g])
             self.covered[g] |= c
