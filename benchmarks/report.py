@@ -170,34 +170,37 @@ SECTIONS: tuple[Section, ...] = (
     Section(
         "Photo to plan latency", "plan_latency",
         "python benchmarks/plan_latency.py --accuracy 40",
-        "`wtinspect plan sample_images/turbines.yaml T1=PHOTO` in a fresh process (imports, model "
-        "load, segmentation, pitch, planning, writing), after one warm-up run; then once more with "
-        "its steps timed (CPU seconds, one run: on a shared CPU the wall times are longer, the CPU "
-        "seconds much the same). `--fast` segments with one pass of the network; its angles are "
-        "compared with the default's on 40 held-out front renders at 640 × 480.",
+        "`wtinspect plan turbines.yaml T1=PHOTO` on one turbine (the sample site's T1) in a fresh "
+        "process (imports, model load, segmentation, pitch, planning, writing), after one warm-up "
+        "run: as shipped (the converted network run by OpenCV, no torch; one pass), with `--full` "
+        "(four passes) and with torch's segmenter; then once more with its steps timed (CPU "
+        "seconds, one run: on a shared CPU the wall times are longer, the CPU seconds much the "
+        "same). One pass and four are compared on 40 held-out front renders at 640 × 480.",
         (F("wall time, median of the runs", ("median_s",), "{:.2f} s", "< 2 s"),
-         F("wall time with `--fast`, median of the runs", ("fast_median_s",), "{:.2f} s", "< 2 s"),
+         F("wall time with `--full` / with torch's segmenter, median of the runs",
+           ("full_median_s", "torch_median_s"), "{:.2f} s / {:.2f} s"),
          F("1-minute load average while measured, before / after",
            ("load_avg_1min.0", "load_avg_1min.1"), "{:.1f} / {:.1f}", "0 (idle)"),
-         F("CPU s: imports of the CLI / torch / torchvision / numba and the planner",
-           tuple(f"phases.default.steps[step={k}].cpu_s" for k in
-                 ("cli", "torch", "torchvision", "planner_imports")), "{:.2f} / {:.2f} / {:.2f} / {:.2f}"),
-         F("CPU s: model load / first look / second look / edge refiner",
-           tuple(f"phases.default.steps[step={k}].cpu_s" for k in
-                 ("model", "first_look", "second_look", "refiner")), "{:.2f} / {:.2f} / {:.2f} / {:.2f}"),
-         F("CPU s: planning / writing the plan / the rest (YAML, contours, pitch, output)",
-           tuple(f"phases.default.steps[step={k}].cpu_s" for k in ("plan", "write", "rest")),
+         F("CPU s: imports of the CLI / the segmenter / numba and the planner",
+           tuple(f"phases.shipped.steps[step={k}].cpu_s" for k in
+                 ("cli", "segmenter_imports", "planner_imports")), "{:.2f} / {:.2f} / {:.2f}"),
+         F("CPU s: reading the network / its pass / the edge refiner",
+           tuple(f"phases.shipped.steps[step={k}].cpu_s" for k in ("model", "network", "refiner")),
            "{:.2f} / {:.2f} / {:.2f}"),
-         F("CPU s of the whole command, default / `--fast`",
-           ("phases.default.total_cpu_s", "phases.fast.total_cpu_s"), "{:.2f} / {:.2f}"),
-         F("`--fast` against the default: right blade count",
-           ("fast_accuracy.fast.right_blade_count", "fast_accuracy.default.right_blade_count"),
-           "{:.1%} against {:.1%}"),
-         F("`--fast` against the default: blade θ error mean",
-           ("fast_accuracy.fast.theta_error_mean_deg", "fast_accuracy.default.theta_error_mean_deg"),
-           "{:.2f}° against {:.2f}°"),
-         F("`--fast` against the default: the sample photo's blade azimuths, largest difference",
-           ("fast_accuracy.sample_photo.max_difference_deg",), "{:.2f}°", "≤ 0.2°")),
+         F("CPU s: planning / writing the plan / the rest (YAML, contours, pitch, output)",
+           tuple(f"phases.shipped.steps[step={k}].cpu_s" for k in ("plan", "write", "rest")),
+           "{:.2f} / {:.2f} / {:.2f}"),
+         F("CPU s of the whole command, shipped / `--full`",
+           ("phases.shipped.total_cpu_s", "phases.full.total_cpu_s"), "{:.2f} / {:.2f}"),
+         F("right blade count: one pass / four / torch's four",
+           ("accuracy.fast.right_blade_count", "accuracy.full.right_blade_count",
+            "accuracy.torch_full.right_blade_count"), "{:.1%} / {:.1%} / {:.1%}"),
+         F("blade θ error mean: one pass / four / torch's four",
+           ("accuracy.fast.theta_error_mean_deg", "accuracy.full.theta_error_mean_deg",
+            "accuracy.torch_full.theta_error_mean_deg"), "{:.2f}° / {:.2f}° / {:.2f}°"),
+         F("the sample photo's blade φ against torch's four passes, largest difference: one pass / four",
+           ("accuracy.sample_photo.max_difference_to_torch_full_deg.fast",
+            "accuracy.sample_photo.max_difference_to_torch_full_deg.full"), "{:.2f}° / {:.2f}°", "≤ 0.2°")),
         adopt='save("plan_latency", figures)'),
     Section(
         "Flight time per turbine", "flight_time",

@@ -155,3 +155,18 @@ def test_plan_segments_a_photo_once_by_default_and_four_times_full(cli, tmp_path
         line = next(x for x in res.stderr.splitlines() if "blade azimuths" in x)
         azimuths.append(sorted(float(a) for a in line.split("azimuths ")[1].split(" deg")[0].split(", ")))
     assert max(abs((a - b + 180) % 360 - 180) for a, b in zip(*azimuths)) < 0.5
+
+
+def test_a_photo_of_nothing_gives_no_instances_and_bad_photos_are_refused():
+    from wtcli.errors import InputError
+
+    sky = np.full((240, 320, 3), (235, 206, 135), np.uint8)
+    inst = cvnet.segment_image(sky)
+    assert inst.image_size == (240, 320) and len(inst[inst.scores >= 0.5]) == 0
+    m = cvnet.load()
+    prob, boxes = m.heads([np.zeros((1, 128, 4, 4), np.float32)] * 4, np.zeros((0, 4), np.float32))
+    assert prob.shape == (0, 4) and boxes.shape == (0, 4, 4)
+    with pytest.raises(InputError, match="too small"):
+        cvnet.segment_image(np.zeros((6, 6, 3), np.uint8))
+    with pytest.raises(InputError, match="score threshold"):
+        cvnet.segment_image(sky, score_threshold=1.5, candidate_floor=None)

@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 
 from wtcli.errors import ModelError
-from wtcli.masks import Instances
+from wtcli.masks import LABELS, Instances
 from wtcli.segment import post
 from wtcli.segment.defaults import CANDIDATE_FLOOR, DEFAULT_MAX_SIZE, DEFAULT_SCORE_THRESHOLD
 from wtcli.segment.post import MIRROR_BOX_SHIFT_PX
@@ -217,6 +217,9 @@ class CvModel:
 
     def heads(self, levels, proposals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, C) class probabilities and (N, C, 4) boxes of the proposals (``infer._box_head``)."""
+        if not len(proposals):  # cv2.dnn takes no empty batch
+            C = len(LABELS) + 1
+            return np.zeros((0, C), np.float32), np.zeros((0, C, 4), np.float32)
         logits, deltas = self.box_head(self.pool(levels, proposals, 7, False))
         e = np.exp(logits - logits.max(1, keepdims=True))
         prob = e / e.sum(1, keepdims=True)
