@@ -40,9 +40,14 @@ def warm_up() -> float:
     site.ground_z(P)
     t.line_of_sight(P, P + 1.0)
     samples = t.surface_samples(2.0)
-    R = np.stack([look_at_rotation(p, t.hub_center) for p in P])
-    measure_coverage(samples, Camera(5456, 3632, 16, 23.2), P, R, 2.0)
-    turbine_coverage(t, Camera(5456, 3632, 16, 23.2), P, R, 2.0, 2.0)  # the refinement's kernel
+    # Photos 6 m off the surface along its normals, so that (sample, photo) pairs pass the
+    # cheap tests and the line-of-sight rounds' kernels are compiled too.
+    k = np.linspace(0, len(samples.points) - 1, 4).astype(int)
+    at = samples.points[k]
+    C = np.concatenate([P, at + 6.0 * samples.normals[k]])
+    R = np.stack([look_at_rotation(c, a) for c, a in zip(C, np.concatenate([[t.hub_center] * len(P), at]))])
+    measure_coverage(samples, Camera(5456, 3632, 16, 23.2), C, R, 2.0)
+    turbine_coverage(t, Camera(5456, 3632, 16, 23.2), C, R, 2.0, 2.0)  # the refinement's kernel
     _warm_flight()
     return time.perf_counter() - t0
 
