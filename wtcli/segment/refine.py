@@ -20,13 +20,12 @@ import threading
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 import torch
 from torch import nn
 
 from wtcli.errors import ModelError
-from wtcli.masks import LABELS, Instances
+from wtcli.masks import LABELS, Instances  # noqa: F401 - LABELS as before
 from wtcli.segment import edges
 from wtcli.segment.model import MODELS_DIR, resolve_precision
 
