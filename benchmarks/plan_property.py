@@ -13,7 +13,9 @@ site goes through the turbines.yaml path (``mission_from_dict``) and ``plan_miss
 Every plan written is checked without the planner's clearance code (``independent_clearance``:
 closed-form distances to the hub sphere, nacelle box and tower frustum, and the blade surface
 as the union of its elliptic sections, each section's distance found by bisection), on every
-waypoint and on every leg sampled every ``LEG_STEP`` m; the sorties' durations from the route's
+waypoint and on every leg sampled every ``LEG_STEP`` m, against the modelled turbines and against
+each grown by its ``geometry_uncertainty_m`` (``grown_turbine``: what the real one may be); the
+sorties' durations from the route's
 own timeline between stops at the launch point; each side's converged coverage
 (``turbine_coverage``, the figure the planner gates on) at the planner's sampling and at half of
 it, with the largest change between the two.
@@ -189,6 +191,41 @@ def independent_min_clearance(turbines, P: np.ndarray, near: float) -> float:
     return cur
 
 
+def grown_turbine(t, u: float):
+    """The turbine whose surfaces lie outside ``t``'s by up to ``u`` (its
+    ``geometry_uncertainty_m``), built as tests/test_turbine_geometry.py's ``true_turbine``:
+    blade semi-axes each grown by at most u, hub and tower radii + u, the nacelle box moved u
+    forward. A plan must keep the safe distance from this one too, not only from the model."""
+    from dataclasses import replace
+
+    if u <= 0:
+        return t
+    g = 0.98 * u
+    f = np.linspace(0, 1, 2001)
+    B = t.blade_semi_axes(f)[1]
+
+    def grown(gt: float):
+        def ratio(r: float, c: float) -> float:
+            return min(1.0, (r * c + 2 * gt) / (c + 2 * g))
+        return replace(
+            t, blade_root_chord=t.blade_root_chord + 2 * g,
+            blade_max_chord=t.blade_max_chord + 2 * g, blade_tip_chord=t.blade_tip_chord + 2 * g,
+            blade_root_thickness_ratio=ratio(t.blade_root_thickness_ratio, t.blade_root_chord),
+            blade_max_chord_thickness_ratio=ratio(t.blade_max_chord_thickness_ratio, t.blade_max_chord),
+            blade_tip_thickness_ratio=ratio(t.blade_tip_thickness_ratio, t.blade_tip_chord),
+            hub_radius=t.hub_radius + g, tower_base_radius=t.tower_base_radius + g,
+            tower_top_radius=t.tower_top_radius + g, nacelle_ahead=t.nacelle_ahead + g)
+
+    lo, hi = 0.0, g  # the thickness knots' largest growth that keeps every section within u
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        if (grown(mid).blade_semi_axes(f)[1] - B).max() <= g:
+            lo = mid
+        else:
+            hi = mid
+    return grown(lo)
+
+
 def enclosing_sphere(t) -> tuple[np.ndarray, float]:
     """(centre, radius) of a sphere round the middle of the tower that holds every part: the
     rotor, nacelle and hub reach at most ``horiz`` sideways and ``vert`` above or below it."""
@@ -250,10 +287,12 @@ def one(seed: int, coverage: bool = True) -> dict:
                 "trace": traceback.format_exc()[-2000:]}
     dt = time.time() - t0
     s, fl = mission.settings, mission.fleet
-    worst = math.inf
+    worst = worst_grown = math.inf
+    grown = [grown_turbine(t, u) for t, u in zip(plan.turbines, mission.geometry_uncertainties())]
     for r in plan.routes:
-        P = leg_samples(r.pos, plan.turbines, s.safe_distance_m + 2)
+        P = leg_samples(r.pos, plan.turbines, s.safe_distance_m + 3)
         worst = min(worst, independent_min_clearance(plan.turbines, P, s.safe_distance_m + 2))
+        worst_grown = min(worst_grown, independent_min_clearance(grown, P, s.safe_distance_m + 2))
     sorties = [x for r in plan.routes for x in sortie_times(r)]
     lo, hi = fl.gimbal_pitch_range
     aim_ok = all(lo - 1e-9 <= float(p) <= hi + 1e-9 for r in plan.routes
@@ -263,6 +302,10 @@ def one(seed: int, coverage: bool = True) -> dict:
            "safe_m": s.safe_distance_m, "min_clearance_m": worst,
            # leg samples LEG_STEP apart: between two the distance dips at most LEG_STEP / 2
            "clearance_violation": bool(worst - 0.5 * LEG_STEP - 0.01 < s.safe_distance_m),
+           # the same against the turbine grown by its geometry_uncertainty_m (grown_turbine)
+           "min_clearance_grown_m": worst_grown,
+           "clearance_violation_grown": bool(worst_grown - 0.5 * LEG_STEP - 0.01
+                                             < s.safe_distance_m),
            "aim_ok": aim_ok,
            "longest_sortie_s": max(sorties), "usable_battery_s": fl.usable_battery_s,
            "battery_overrun": bool(max(sorties) > fl.usable_battery_s + 1e-6),
@@ -300,16 +343,23 @@ def summarize(res: list[dict], seconds: float) -> dict:
     cov = [r for r in ok if "min_side_fine" in r]
     aimed = [r for r in ok if "aim_ok" in r]
     clearance = sum(r["clearance_violation"] for r in ok)
+    grown = [r for r in ok if "clearance_violation_grown" in r]
     aim = sum(not r["aim_ok"] for r in aimed)
     return {
         "sites": len(res), "planned": len(ok), "plan_errors": len(refused),
         "crashes_exit_1": len(crashes),
         "refusals_not_one_line": sum(not r["one_line"] for r in refused),
         "refusal_exit_codes": dict(Counter(str(r["exit"]) for r in refused)),
-        "violations": clearance + aim, "clearance_violations": clearance,
+        "violations": clearance + aim + sum(r["clearance_violation_grown"] for r in grown),
+        "clearance_violations": clearance,
         "aim_violations": aim, "aim_checked": len(aimed),
         "min_margin_over_safe_distance_m": min((r["min_clearance_m"] - r["safe_m"] for r in ok),
                                                default=None),
+        # against each turbine grown by its geometry_uncertainty_m (the "true" turbine)
+        "clearance_violations_grown_turbine": sum(r["clearance_violation_grown"] for r in grown),
+        "grown_checked": len(grown),
+        "min_margin_over_safe_distance_grown_m": min(
+            (r["min_clearance_grown_m"] - r["safe_m"] for r in grown), default=None),
         "battery_overruns": sum(r["battery_overrun"] for r in ok),
         "max_sortie_over_usable_s": max((r["longest_sortie_s"] - r["usable_battery_s"] for r in ok),
                                         default=None),

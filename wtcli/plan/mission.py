@@ -30,8 +30,9 @@ from wtcli.errors import ConfigError, PlanError
 from wtcli.geometry import Camera, Turbine
 from wtcli.geometry.coverage import Coverage, turbine_coverage
 from wtcli.plan.config import Mission
-from wtcli.plan.paths import (WP, Chunk, PassParams, _Blocked, add_gap_views, blade_chunk,
-                              connect, gap_plan, nacelle_chunk, tower_chunk)
+from wtcli.plan.paths import (GAP_ROUND_FINE_SAMPLES, WP, Chunk, PassParams, _Blocked,
+                              add_gap_views, blade_chunk, connect, gap_plan, nacelle_chunk,
+                              tower_chunk)
 from wtcli.plan.clearance import Site
 from wtcli.plan.zone import initial_point, zone
 from wtcli.pitch import classify_theta
@@ -655,7 +656,7 @@ def _chunks(job: tuple) -> list[Chunk]:
                 break  # met, or the last round gained less than half a point where it is short
             last = mins
             more = gap_plan(t, cov.samples, cov.covered, site, pp, s.max_incidence_deg, reach,
-                            short)[0]
+                            short, GAP_ROUND_FINE_SAMPLES)[0]
             if not any(more.values()):
                 break
             add_gap_views(chunks, more, site, pp)

@@ -729,6 +729,9 @@ GAP_BORDER = 0.05  # frame margin the candidates keep (coverage itself uses 0.02
 GAP_FINE_GRID = ((2.0, 6.0, 12),)
 GAP_FINE_CANDIDATES = 24000
 GAP_FINE_SAMPLES = 8  # at most this many samples searched one by one, per blade
+# ... and in the rounds for a side still short, where each view decides between a plan and a
+# refusal (searched on the ray-walked clearance, a sample costs a few milliseconds)
+GAP_ROUND_FINE_SAMPLES = 24
 GAP_SPAN_BINS = 8  # what the grids leave is searched again in this many stretches of the span
 GAP_BIN_AREA = 0.05  # m^2: a stretch missing less is not worth a view
 GAP_POINTS = 150  # missed samples of a blade the search is asked about at most
@@ -878,10 +881,11 @@ def insert_views(chunk: Chunk, views: list[tuple[np.ndarray, np.ndarray, str]], 
 
 def gap_plan(turbine: Turbine, samples: SurfaceSamples, covered: np.ndarray, site: Site,
              pp: PassParams, max_incidence_deg: float, max_distance: float,
-             blades: set[int] | None = None
+             blades: set[int] | None = None, fine_samples: int = GAP_FINE_SAMPLES
              ) -> tuple[dict[int, list[tuple[np.ndarray, np.ndarray, str]]], np.ndarray]:
     """``gap_views`` for each blade (all, or those in ``blades``) over its samples that
-    ``covered`` misses (``samples``: the turbine's blade ``SurfaceSamples``). Returns
+    ``covered`` misses (``samples``: the turbine's blade ``SurfaceSamples``); what the grids leave,
+    up to ``fine_samples`` samples a blade, is searched one sample at a time. Returns
     {blade index: [(position, viewing direction, component)]} and ``covered`` with what the views
     add (predicted with the margins of ``gap_views``)."""
     covered = covered.copy()
@@ -932,7 +936,7 @@ def gap_plan(turbine: Turbine, samples: SurfaceSamples, covered: np.ndarray, sit
                     covered[sel[got]] = True
             idx = idx[~covered[idx]]
         # Then what is left, largest first, one sample at a time on the fine grid.
-        for i in idx[np.argsort(-samples.area[idx], kind="stable")][:GAP_FINE_SAMPLES]:
+        for i in idx[np.argsort(-samples.area[idx], kind="stable")][:fine_samples]:
             if covered[i] or len(out[k]) >= GAP_MAX_VIEWS:
                 continue
             views = gap_views(turbine, samples.points[[i]], samples.normals[[i]],
