@@ -166,7 +166,8 @@ def test_root_trailing_edge_miss_is_the_root_patch():
     cov = turbine_coverage(t, CAM, pos, rot, gsd, m.settings.coverage_spacing_m, 60.0, "blades")
     missed = cov.samples[~cov.covered]
     assert len(missed) >= 1
-    assert (missed.span < 0.07).all() and (missed.side == 2).all()  # trailing edge, at the root
+    assert (missed.span < 0.07).all()  # at the root: the trailing edge, and slivers where
+    assert missed.area[missed.side != 2].sum() < 0.01  # the other sides enter the hub
     for b, sides in cov.by_blade_side().items():
         assert sides["trailing_edge"] >= 0.96, (b, sides)
 

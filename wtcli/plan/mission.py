@@ -82,7 +82,8 @@ def pass_params(mission: Mission) -> tuple[PassParams, float, float]:
             f"lens, a coarser target_gsd_mm (>= {float(cam.gsd_mm(st_min / GSD_FILL)):.2f}) or "
             "allow_coarser_gsd: true")
     pp = PassParams(cam, st, 0.97 * cam.distance_for_gsd(gsd_eval), req, st_min, s.overlap,
-                    s.min_altitude_m, mission.fleet.gimbal_pitch_range)
+                    s.min_altitude_m, mission.fleet.gimbal_pitch_range,
+                    cam.distance_for_gsd(1.02 * gsd_eval), s.max_incidence_deg)
     return pp, gsd_eval, float(cam.gsd_mm(st))
 
 
@@ -112,16 +113,19 @@ def speeds(mission: Mission, pp: PassParams) -> Speeds:
                   cap.min_photo_interval_s)
 
 
-def capture_speed(mission: Mission, pp: PassParams) -> tuple[float, dict[str, float]]:
-    """The speed along the photo passes at the nominal standoff, and the limits it is the
-    slowest of: the fleet's ``inspection_speed_m_s`` (and ``max_speed_m_s``), the photo spacing
-    over the camera's ``min_photo_interval_s``, and the motion-blur limit ``max_blur_px`` * GSD /
-    ``shutter_s`` (a station closer to the surface, a finer GSD, is passed slower:
-    ``leg_speeds``)."""
+def capture_speed(mission: Mission, pp: PassParams,
+                  standoff: float | None = None) -> tuple[float, dict[str, float]]:
+    """The speed along the photo passes at ``standoff`` (default the nominal one; the plan's
+    summary gives the blade passes' median: a ring of oblique passes flies closer), and the
+    limits it is the slowest of: the fleet's ``inspection_speed_m_s`` (and ``max_speed_m_s``),
+    the photo spacing there over the camera's ``min_photo_interval_s``, and the motion-blur
+    limit ``max_blur_px`` * GSD / ``shutter_s`` (a station closer to the surface, a finer GSD,
+    is passed slower: ``leg_speeds``)."""
     fl, cap = mission.fleet, mission.capture
+    st = pp.standoff if standoff is None else standoff
     limits = {"fleet_m_s": min(fl.inspection_speed_m_s, fl.max_speed_m_s),
-              "photo_interval_m_s": cap.interval_speed_m_s(pp.spacing(pp.standoff)),
-              "motion_blur_m_s": cap.blur_speed_m_s(float(pp.camera.gsd_mm(pp.standoff)))}
+              "photo_interval_m_s": cap.interval_speed_m_s(pp.spacing(st)),
+              "motion_blur_m_s": cap.blur_speed_m_s(float(pp.camera.gsd_mm(st)))}
     return min(limits.values()), limits
 
 
@@ -168,14 +172,18 @@ def blade_order(t: Turbine) -> list[int]:
 
 def turbine_chunks(t: Turbine, site: Site, pp: PassParams, mission: Mission,
                    split: dict[int, set[str]] | None = None,
-                   previous: list[Chunk] | None = None) -> list[Chunk]:
+                   previous: list[Chunk] | None = None, rings: bool = False) -> list[Chunk]:
     """Overview photo, blades, nacelle, tower. With ``previous`` (an earlier result for the same
-    turbine), only the blades named in ``split`` are rebuilt."""
+    turbine), only the blades named in ``split`` are rebuilt. ``rings``: blades flown as a ring of
+    oblique passes where one sees every section (``blade_chunk``)."""
     if previous is not None:
         out = []
         try:
             for c in previous:
-                if c.name.startswith("blade") and int(c.name[5:]) - 1 in (split or {}):
+                # A ring blade's passes already see every section: what it misses is hidden
+                # (the root behind the hub), which splitting does not reach; gap views do.
+                if c.name.startswith("blade") and int(c.name[5:]) - 1 in (split or {}) \
+                        and not c.pattern.startswith("ring"):
                     k = int(c.name[5:]) - 1
                     c = blade_chunk(t, k, site, pp, f"{t.id}/blade{k + 1}", split[k])
                 out.append(c)
@@ -195,7 +203,7 @@ def turbine_chunks(t: Turbine, site: Site, pp: PassParams, mission: Mission,
     try:
         for k in blade_order(t):
             chunks.append(blade_chunk(t, k, site, pp, f"{t.id}/blade{k + 1}",
-                                      (split or {}).get(k, set())))
+                                      (split or {}).get(k, set()), rings))
         if mission.settings.inspect_nacelle:
             chunks.append(nacelle_chunk(t, site, pp))
             _need_stations(chunks[-1], pp, "inspect_nacelle")
@@ -618,7 +626,7 @@ def _tour(job: tuple) -> tuple[list[Chunk], dict, list[float]]:
 def _chunks(job: tuple) -> list[Chunk]:
     t, site, pp, mission, pattern, gsd_eval = job
     s = mission.settings
-    chunks = turbine_chunks(t, site, pp, mission)
+    chunks = turbine_chunks(t, site, pp, mission, rings=pattern == "adaptive")
     if pattern == "adaptive":
         cov = _blade_coverage_from_chunks(t, chunks, mission.camera, gsd_eval,
                                           s.coverage_spacing_m, s.max_incidence_deg)
@@ -771,6 +779,9 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
         tours[t.id], times[t.id] = chunks, tour_times
         links.update(tour_links)
         notes += [n for c in chunks for n in c.notes]
+    st_blades = [w.standoff for cs in tours.values() for c in cs if c.name.startswith("blade")
+                 for w in c.wps if w.photo and w.standoff is not None]
+    st_pass = float(np.median(st_blades)) if st_blades else pp.standoff
 
     # Visit order and split across UAVs (balanced by estimated flight time).
     v_slow = capture_speed(mission, pp)[0]  # the split's estimate (chunk times are exact)
@@ -847,7 +858,7 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
                             "accept it")
 
     summary = _summary(routes, mission, pattern, check, coverage, assignment, gsd_eval,
-                       gsd_nominal, pp, notes, launch)
+                       gsd_nominal, pp, notes, launch, st_pass)
     return Plan(real, Camera(mission.camera.width_px, mission.camera.height_px,
                              mission.camera.focal_mm, mission.camera.sensor_width_mm),
                 routes, s.safe_distance_m, gsd_eval, mission.site_origin, summary)
@@ -855,7 +866,7 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
 
 def _summary(routes: list[Route], mission: Mission, pattern: str, check: dict, coverage: dict,
              assignment: dict, gsd_eval: float, gsd_nominal: float, pp: PassParams,
-             notes: list[str], launch: np.ndarray) -> dict:
+             notes: list[str], launch: np.ndarray, standoff: float | None = None) -> dict:
     per_comp: dict[str, dict] = {}
     per_uav: dict[str, dict] = {}
     for r in routes:
@@ -874,7 +885,7 @@ def _summary(routes: list[Route], mission: Mission, pattern: str, check: dict, c
     budget: dict[str, dict[str, float]] = {}
     for r in routes:
         budget.update(r.summary.get("time_budget", {}))
-    v_cap, limits = capture_speed(mission, pp)
+    v_cap, limits = capture_speed(mission, pp, standoff)
     zones = {}
     for t in mission.turbines:
         z = zone(t, mission.extra(t.id).measured_tips)
@@ -905,7 +916,7 @@ def _summary(routes: list[Route], mission: Mission, pattern: str, check: dict, c
                     "min_photo_interval_s": mission.capture.min_photo_interval_s,
                     "shutter_s": mission.capture.shutter_s,
                     "max_blur_px": mission.capture.max_blur_px,
-                    "photo_spacing_m": pp.spacing(pp.standoff)},
+                    "photo_spacing_m": pp.spacing(pp.standoff if standoff is None else standoff)},
         "predicted_coverage": coverage,
         "requested_gsd_mm": s.target_gsd_mm,
         "achieved_gsd_mm": gsd_nominal,

@@ -1,11 +1,13 @@
 """Step 1.5 (eq. 8-9): the trajectories around one turbine's components.
 
-Blades (adaptive, eq. 8): for each blade, passes along its real direction d, one per side
-(leading edge +c, pressure side +n, trailing edge -c, suction side -n in ``Turbine.blade_frame``),
-each at the camera-to-surface standoff that gives the target GSD: the camera sits at the local
-section's support distance in the viewing direction plus the standoff, and looks back at the blade
-axis. Passes alternate root->tip and tip->root, joined by arcs around the blade axis (around the tip
-at the outer end); the flight then returns to the blade's start point S_p,i (eq. 8's return leg).
+Blades (adaptive, eq. 8): for each blade, passes along its real direction d: a ring of four or
+five oblique passes at fixed angles round the blade (``_ring_passes``: the fewest that see every
+section whole by coverage's own test), else one per side (leading edge +c, pressure side +n,
+trailing edge -c, suction side -n in ``Turbine.blade_frame``), each at the camera-to-surface
+standoff that gives the target GSD: the camera sits at the local section's support distance in
+the viewing direction plus the standoff, and looks back at the blade axis. Passes alternate
+root->tip and tip->root, joined by arcs around the blade axis (around the tip at the outer end);
+the flight then returns to the blade's start point S_p,i (eq. 8's return leg).
 
 Where the geometry blocks a pass (a blade pointing down past the tower leaves no room behind it
 for the trailing edge; the hub and nacelle crowd the roots), the blocked stations are flown as two
@@ -18,8 +20,8 @@ that sees past what blocks the passes, chosen by greedy set cover among viewpoin
 clearance, and flown where they lengthen the blade's trajectory least.
 
 Tower and nacelle (fixed, the paper's "determined in advance"): vertical photo columns around the
-tower, flown up and down in turn; a loop along both sides, the rear, the top and the underside
-of the nacelle.
+tower, flown up and down in turn, each with a view down to the tower's foot; the nacelle's sides,
+rear, top and underside in rows of photos that tile each face.
 Stations that would come closer than the required clearance to any part are dropped.
 
 Every waypoint keeps ``required`` clearance (safe distance + tracking margin) from every part of
@@ -67,6 +69,8 @@ class PassParams:
     overlap: float
     min_altitude: float
     pitch_range: tuple[float, float] = (-90.0, 90.0)  # camera elevation the gimbal reaches, deg
+    reach: float = 0.0  # farthest camera-to-surface distance a view is planned at (GSD + 2 %)
+    max_incidence_deg: float = 60.0  # coverage's incidence limit
 
     @property
     def leg_required(self) -> float:
@@ -97,6 +101,7 @@ class Chunk:
     name: str  # blade1 | nacelle | tower | overview
     wps: list[WP] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    pattern: str = ""  # a blade's: "ring4"/"ring5" (blade_chunk's ring of passes) or "" (by side)
 
     @property
     def start(self) -> np.ndarray:
@@ -321,21 +326,136 @@ def _side_points(turbine: Turbine, k: int, s: np.ndarray, gamma: np.ndarray,
     return pos, -w
 
 
+# Rings of views round a blade (deg in the c-n plane from the leading edge towards the pressure
+# side), tried fewest first: four on the diagonals between adjacent sides (slender blades), five
+# (wide or round sections: four leave the side centres too far or too oblique).
+RINGS = ((45.0, 135.0, 225.0, 315.0), (0.0, 72.0, 144.0, 216.0, 288.0))
+RING_SHIFT_DEG = (0.0, 10.0, -10.0, 20.0, -20.0, 30.0, -30.0)  # a blocked station's turns
+RING_MAX_DROPPED = 3  # blocked stations a ring pass leaves out; more: flown side by side
+RING_SECTION_POINTS = 96  # points round a section a ring's views must all see
+RING_MARGIN_DEG = 3.0  # kept from the incidence limit when judging a section (flight error)
+
+
+def _camera_rotations(fwd: np.ndarray) -> np.ndarray:
+    """(K, 3, 3) world->camera rotations of photos aimed along ``fwd`` (K, 3) as a route
+    records them (compass yaw, gimbal pitch, no roll): what coverage is measured with."""
+    F = fwd / np.linalg.norm(fwd, axis=1)[:, None]
+    yaw = np.degrees(np.arctan2(F[:, 0], F[:, 1]))
+    pitch = np.degrees(np.arcsin(np.clip(F[:, 2], -1.0, 1.0)))
+    return np.array([Camera.rotation_from_yaw_pitch(y, p) for y, p in zip(yaw, pitch)])
+
+
+def _ring_standoffs(turbine: Turbine, k: int, pp: PassParams, S: np.ndarray, angles_deg,
+                    E: np.ndarray) -> np.ndarray:
+    """Per station (span S), the farthest standoff in E from which views at ``angles_deg`` (in
+    the c-n plane, from +c towards +n) see every point round the blade's section by coverage's
+    own test (``imaged``: the frame less 5 %, the distance ``pp.reach``, the incidence limit
+    less RING_MARGIN_DEG); NaN where none does."""
+    s0, s1 = turbine.blade_root_offset, turbine.tip_radius
+    f = (np.clip(S, s0, s1) - s0) / (s1 - s0)
+    A, B = turbine.blade_semi_axes(f)
+    d, c, n = turbine.blade_frame(k)
+    t = np.linspace(0.0, 2 * math.pi, RING_SECTION_POINTS, endpoint=False)
+    xc, yn = A[:, None] * np.cos(t), B[:, None] * np.sin(t)  # (stations, points round)
+    nc, nn = B[:, None] * np.cos(t), A[:, None] * np.sin(t)
+    nl = np.hypot(nc, nn)
+    P = turbine.hub_center + S[:, None, None] * d + xc[..., None] * c + yn[..., None] * n
+    N = (nc / nl)[..., None] * c + (nn / nl)[..., None] * n
+    seg = np.hypot(np.diff(xc, axis=1, append=xc[:, :1]), np.diff(yn, axis=1, append=yn[:, :1]))
+    reach = pp.reach if pp.reach > 0 else pp.max_standoff
+    limit = pp.max_incidence_deg - RING_MARGIN_DEG
+    e_best = np.full(len(S), np.nan)
+    for e in np.sort(E):  # closest first; a farther standoff that also works replaces it
+        seen = np.zeros(P.shape[:2], bool)
+        for g in np.radians(angles_deg):
+            pos, fwd = _side_points(turbine, k, S, np.full(len(S), g), np.full(len(S), e))
+            R = _camera_rotations(fwd)
+            seen |= imaged(P - pos[:, None, :], N, R[:, None], pp.camera, reach, limit, 0.05)
+        ok = (seg * ~seen).sum(axis=1) <= 1e-3 * seg.sum(axis=1)
+        e_best[ok] = e
+    return e_best
+
+
+def _ring_passes(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
+                 ) -> tuple[int, list[tuple[str, np.ndarray, np.ndarray, np.ndarray]],
+                            list[str]] | None:
+    """Blade k flown as one of RINGS: passes root -> tip at fixed angles round the blade, each
+    imaging parts of two or three sides obliquely, the fewest that see the whole section at
+    every station (``_ring_standoffs``, at the farthest standoff between ``pp.min_standoff``
+    and ``pp.standoff`` that works: a looser blur limit). (views per station, passes), each
+    pass named after the side nearest its angle, and notes on the stations left out. None if
+    no ring sees every section, or a pass
+    has more than RING_MAX_DROPPED blocked stations (clearance, ground, gimbal): the blade is
+    then flown side by side."""
+    E = np.arange(pp.standoff, max(pp.min_standoff, pp.standoff - 2.0) - 1e-9, -0.25)
+    # Station spacing from the footprint at the closest standoff: overlap never below target.
+    S = blade_stations(turbine, pp.spacing(float(E[-1])))
+    side_deg = np.array([math.degrees(math.atan2(*SIDE_DIRS[x][::-1])) for x in BLADE_SIDES])
+    for ring in RINGS:
+        e = _ring_standoffs(turbine, k, pp, S, ring, E)
+        if np.isnan(e).any():
+            continue
+        # The stations again at the footprint of the closest standoff the ring uses (fewer
+        # photos where it flies farther), if the ring still sees every section there.
+        S2 = blade_stations(turbine, pp.spacing(float(e.min())))
+        e2 = _ring_standoffs(turbine, k, pp, S2, ring, E[E >= e.min() - 1e-9])
+        if not np.isnan(e2).any():
+            S, e = S2, e2
+        out, notes = [], []
+        for g in ring:
+            gg, ee = np.full(len(S), math.radians(g)), e.copy()
+            pos, fwd = _side_points(turbine, k, S, gg, ee)
+            pos0 = pos.copy()
+            blocked = (site.clearance(pos, pp.required) < pp.required) | \
+                ~site.above_ground(pos, pp.min_altitude) | ~pp.aim_ok(fwd)
+            for j in np.nonzero(blocked)[0]:  # (near the hub) turned or moved out until clear
+                D, X = np.meshgrid(np.radians(RING_SHIFT_DEG),
+                                   np.arange(e[j], pp.max_standoff + 1e-9, 0.25), indexing="ij")
+                D, X = D.ravel(), X.ravel()
+                cp, cf = _side_points(turbine, k, np.full(len(D), S[j]), gg[j] + D, X)
+                ok = (site.clearance(cp, pp.required) >= pp.required) & \
+                    site.above_ground(cp, pp.min_altitude) & pp.aim_ok(cf)
+                if ok.any():
+                    i = int(np.argmax(ok))
+                    pos[j], fwd[j], ee[j], blocked[j] = cp[i], cf[i], X[i], False
+            if blocked.sum() > RING_MAX_DROPPED:
+                return None
+            off = np.abs((g - side_deg + 180.0) % 360.0 - 180.0)
+            side = BLADE_SIDES[int(np.argmin(off))]
+            keep = ~blocked  # a root station wedged against the hub: left out, coverage decides
+            if blocked.any():
+                parts = sorted({site.nearest_part(pos0[j])[0] for j in np.nonzero(blocked)[0]})
+                notes.append(f"{label}/{side}: {int(blocked.sum())} station(s) of the {g:g} deg "
+                             f"pass unreachable at a safe distance (blocked by "
+                             f"{', '.join(parts)}): dropped")
+            out.append((side, pos[keep], fwd[keep], ee[keep]))
+        return len(ring), out, notes
+    return None
+
+
 def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str,
-                split_sides: frozenset[str] | set[str] = frozenset()) -> Chunk:
+                split_sides: frozenset[str] | set[str] = frozenset(),
+                ring_first: bool = False) -> Chunk:
     """All four sides of blade k (index), as passes joined by arcs, ending at its start point.
 
     ``split_sides``: sides flown as two oblique passes everywhere (a wide chord's flat sides,
-    whose edges a single head-on pass sees beyond the incidence limit)."""
+    whose edges a single head-on pass sees beyond the incidence limit). ``ring_first``: a ring
+    of four or five oblique passes round the blade (``_ring_passes``) where one sees every
+    section; side by side where none does."""
     chunk = Chunk(turbine.id, f"blade{k + 1}")
     d, c, n = turbine.blade_frame(k)
     spacing = pp.spacing(pp.standoff)
     S = blade_stations(turbine, spacing)
     # (side, positions, fwd, standoffs) root -> tip
     passes: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]] = []
+    ring = _ring_passes(turbine, k, site, pp, label) if ring_first else None
+    if ring is not None:
+        chunk.pattern, passes = f"ring{ring[0]}", ring[1]
+        chunk.notes += ring[2]
+        S = S[:0]
     extra = [0.0] + [e for e in (0.5, 1.0, 1.5) if pp.standoff + e <= pp.max_standoff]
     closer = [e for e in (-0.5, -1.0) if pp.standoff + e >= pp.min_standoff]
-    for side in BLADE_SIDES:
+    for side in BLADE_SIDES if len(S) >= 2 else ():
         sc, sn = SIDE_DIRS[side]
         g0 = math.atan2(sn, sc)
         pos0, fwd0 = _side_points(turbine, k, S, np.full(len(S), g0), np.full(len(S), pp.standoff))
@@ -393,9 +513,13 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
                                    f"from the {'+' if sign > 0 else '-'} side at a safe distance "
                                    f"(blocked by {', '.join(parts)}): dropped")
 
-    # Alternate out and back; join passes with arcs around the blade axis.
+    # Out and back in turn (each pass from its end nearer the last one's end); joined by arcs
+    # around the blade axis.
     for i, (side, pos, fwd, st) in enumerate(passes):
-        if i % 2 == 1:
+        if not len(pos):
+            continue
+        if chunk.wps and np.linalg.norm(pos[-1] - chunk.wps[-1].pos) < \
+                np.linalg.norm(pos[0] - chunk.wps[-1].pos):
             pos, fwd, st = pos[::-1], fwd[::-1], st[::-1]
         comp = f"{label}/{side}"
         if chunk.wps:
@@ -581,36 +705,88 @@ def _back_off(site: Site, pp: PassParams, pos: np.ndarray, fwd: np.ndarray) -> n
     return pos
 
 
+FACE_ROW_LAP = 0.3  # least overlap between neighbouring rows of photos on a nacelle face
+FACE_BORDER = 0.05  # frame margin a face's rows keep (coverage itself ignores 0.02)
+FACE_TURN_DEG = (15.0, 30.0, 45.0)  # a blocked face station's oblique alternatives (incidence)
+
+
+def _face_rows(center: np.ndarray, normal: np.ndarray, u: np.ndarray, v: np.ndarray,
+               half_u: float, half_v: float, pp: PassParams,
+               tilt: np.ndarray | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Rows of photo stations (positions, viewing directions) imaging a flat rectangular face
+    head-on from ``pp.standoff``: rows along u, as many across v as the frame's extent across
+    them needs (FACE_ROW_LAP overlap between rows), stations along each row from the frame's
+    extent along it at ``pp.overlap``. Which frame side lies along u is the camera's as a route
+    records it (compass yaw, no roll); ``tilt``: a horizontal face's view tipped 1 deg towards
+    this direction, which fixes that yaw (image rows along u)."""
+    fwd = -normal if tilt is None else _unit(-normal + 0.02 * tilt)
+    R = _camera_rotations(fwd[None])[0]
+    fw, fh = pp.camera.footprint_m(pp.standoff)
+    along, across = (fw, fh) if abs(R[0] @ u) >= abs(R[1] @ u) else (fh, fw)
+    use_a, use_c = (1 - 2 * FACE_BORDER) * along, (1 - 2 * FACE_BORDER) * across
+    n_v = 1 if 2 * half_v <= use_c else int(math.ceil((2 * half_v - use_c)
+                                                        / ((1 - FACE_ROW_LAP) * use_c))) + 1
+    n_u = 1 if 2 * half_u <= use_a else int(math.ceil((2 * half_u - use_a)
+                                                        / ((1 - pp.overlap) * along))) + 1
+    vs = np.linspace(-1, 1, n_v) * max(half_v - use_c / 2, 0.0)
+    us = np.linspace(-1, 1, n_u) * max(half_u - use_a / 2, 0.0)
+    rows = []
+    for i, dv in enumerate(vs):
+        uu = us if i % 2 == 0 else us[::-1]
+        pos = center + pp.standoff * normal + dv * v + uu[:, None] * u
+        rows.append((pos, np.tile(fwd, (len(uu), 1))))
+    return rows
+
+
+def _face_turn(site: Site, pp: PassParams, pos: np.ndarray, fwd: np.ndarray,
+               dirs: tuple[np.ndarray, ...], bad: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stations ``bad`` (too close to a part: the tower under the nacelle) turned about the face
+    point they look at, towards +- each of ``dirs`` by FACE_TURN_DEG, at the standoff or out to
+    ``pp.max_standoff``: the least turn that is clear and within the gimbal's reach.
+    (positions, directions, still bad)."""
+    pos, fwd, bad = pos.copy(), fwd.copy(), bad.copy()
+    dist = np.array([pp.standoff, pp.max_standoff])
+    for j in np.nonzero(bad)[0]:
+        target = pos[j] + pp.standoff * fwd[j]
+        W = np.array([math.cos(math.radians(b)) * -fwd[j] + sg * math.sin(math.radians(b)) * d
+                      for b in FACE_TURN_DEG for d in dirs for sg in (1.0, -1.0)])
+        W = np.repeat(W, len(dist), axis=0)
+        D = np.tile(dist, len(W) // len(dist))
+        cp, cf = target + D[:, None] * W, -W
+        ok = _filter_stations(site, pp, cp, cf)
+        if ok.any():
+            i = int(np.argmax(ok))
+            pos[j], fwd[j], bad[j] = cp[i], cf[i], False
+    return pos, fwd, bad
+
+
 def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams) -> Chunk:
-    """The nacelle's left side, rear face, right side, top and underside, one pass each."""
+    """The nacelle's left side, rear face, right side, top and underside, each in rows of
+    photos that cover the face (``_face_rows``). The front face is the hub's: not flown."""
     chunk = Chunk(turbine.id, "nacelle")
     a = turbine.axis
     side = np.cross(Z, a)
     half = np.array([turbine.nacelle_length, turbine.nacelle_width, turbine.nacelle_height]) / 2
     ctr = turbine.nacelle_center
-    spacing = pp.spacing(pp.standoff)
-    m = max(2, int(math.ceil(2 * half[0] / spacing)) + 1)
-    along = np.linspace(half[0], -half[0], m)  # front -> rear
-    passes = []
-    for sgn in (1.0, -1.0):  # left side (front -> rear), right side (rear -> front)
-        off = sgn * side * (half[1] + pp.standoff)
-        pos = ctr + along[:, None] * a + off
-        fwd = np.tile(-sgn * side, (m, 1))
-        passes.append((f"{turbine.id}/nacelle", pos, fwd))
-        if sgn > 0:  # rear face between the two sides
-            passes.append((f"{turbine.id}/nacelle", (ctr - a * (half[0] + pp.standoff))[None], a[None]))
-    top = ctr + Z * (half[2] + pp.standoff) + along[::-1][:, None] * a  # rear -> front ... then back
-    passes.append((f"{turbine.id}/nacelle", top[::-1], np.tile(-Z, (m, 1))))
-    # The underside, rear -> front, looking up: the stations over the tower top are dropped (too
-    # close to it), those ahead of and behind it kept where the gimbal reaches straight up.
-    bottom = ctr - Z * (half[2] + pp.standoff) + along[::-1][:, None] * a
-    passes.append((f"{turbine.id}/nacelle", bottom, np.tile(Z, (m, 1))))
-    for i, (comp, pos, fwd) in enumerate(passes):
-        if i == 2:
-            pos, fwd = pos[::-1], fwd[::-1]  # right side rear -> front
+    comp = f"{turbine.id}/nacelle"
+    faces = [  # (face centre, outward normal, along, across, half along, half across, tilt)
+        (ctr + side * half[1], side, -a, Z, half[0], half[2], None),  # left, front -> rear
+        (ctr - a * half[0], -a, side, Z, half[1], half[2], None),  # rear
+        (ctr - side * half[1], -side, a, Z, half[0], half[2], None),  # right, rear -> front
+        (ctr + Z * half[2], Z, -a, side, half[0], half[1], side),  # top
+        # the underside, looking up: stations over the tower top are dropped (too close to it)
+        (ctr - Z * half[2], -Z, a, side, half[0], half[1], side)]
+    flown: list[tuple[np.ndarray, np.ndarray]] = []
+    for i, (c, nrm, u, v, hu, hv, tilt) in enumerate(faces):
+        rows = _face_rows(c, nrm, u, v, hu, hv, pp, tilt)
+        pos = np.vstack([r[0] for r in rows])
+        fwd = np.vstack([r[1] for r in rows])
         pos = _back_off(site, pp, pos, fwd)
         keep = _filter_stations(site, pp, pos, fwd)
-        if i == len(passes) - 1 and keep.sum() < 2:  # a lone underside photo: not worth the detour
+        pos, fwd, bad = _face_turn(site, pp, pos, fwd, (u, v), ~keep)
+        keep = ~bad
+        if i == len(faces) - 1 and keep.sum() < 2:  # a lone underside photo: not worth the detour
             chunk.notes.append(f"{comp}: underside: {int(keep.sum())} station(s) clear of the tower "
                                "top and within the gimbal's reach: not flown")
             continue
@@ -618,10 +794,32 @@ def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams) -> Chunk:
             aimless = int((~pp.aim_ok(fwd)).sum())
             chunk.notes.append(f"{comp}: {int((~keep).sum())} station(s) too close to a part"
                                + (f" or beyond {pp.gimbal_text()}" if aimless else "") + ": dropped")
+        if keep.any():
+            flown.append((pos[keep], fwd[keep]))
+    # The faces in the order and directions with the shortest joins (all of them tried; a join
+    # through the nacelle counts twice its length plus 20 m: it is flown round).
+    ends = np.array([f[0][x] for f in flown for x in (0, -1)])  # face i: start 2i, end 2i + 1
+    E0, E1 = np.repeat(ends, len(ends), axis=0), np.tile(ends, (len(ends), 1))
+    L = np.linalg.norm(E1 - E0, axis=1)
+    blocked = site.segment_clearance(E0, E1, LEG_STEP, pp.required) < pp.leg_required
+    cost = (L + blocked * (L + 20.0)).reshape(len(ends), len(ends))
+    best, plan = np.inf, []
+    for order in itertools.permutations(range(len(flown))):
+        for flips in itertools.product((0, 1), repeat=len(flown)):
+            c = sum(cost[2 * a + 1 - fa, 2 * b + fb] for a, b, fa, fb in
+                    zip(order, order[1:], flips, flips[1:]))
+            if c < best - 1e-9:
+                best, plan = c, list(zip(order, flips))
+    for i, flip in plan:
+        pos, fwd = flown[i] if not flip else (flown[i][0][::-1], flown[i][1][::-1])
         # _back_off only moves a station out (a coarser GSD: a looser blur limit)
         append_chain(chunk, site, pp, [WP(p, f, True, comp, standoff=pp.standoff)
-                                       for p, f in zip(pos[keep], fwd[keep])], droppable=True)
+                                       for p, f in zip(pos, fwd)], droppable=True)
     return chunk
+
+
+TOWER_PHASES = 6  # column phases tried (fractions of the angle between columns)
+TOWER_FOOT_DEG = 30.0  # each column's lowest view looks down this far, to the tower's foot
 
 
 def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
@@ -640,16 +838,46 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
     if start_near is not None:  # begin with the column nearest the previous point
         v = np.asarray(start_near) - turbine.base_xyz
         yaw0 = math.atan2(v[1], v[0])
+    r = rb + (rt - rb) * zs / H
+
+    def column(ang: float) -> tuple[np.ndarray, np.ndarray]:
+        """A column's stations top -> bottom; the lowest looks down TOWER_FOOT_DEG from the
+        least standoff at the least altitude, to reach the tower's foot."""
+        u = np.array([math.cos(ang), math.sin(ang), 0.0])
+        pos = turbine.base_xyz + (r + pp.standoff)[:, None] * u + zs[:, None] * Z
+        fwd = np.tile(-u, (nz, 1))
+        zf = pp.min_altitude + 0.1
+        foot = turbine.base_xyz + (rb + (rt - rb) * zf / H + pp.min_standoff) * u + zf * Z
+        look = math.radians(TOWER_FOOT_DEG)
+        return (np.vstack([pos, foot]),
+                np.vstack([fwd, -math.cos(look) * u - math.sin(look) * Z]))
+
+    # The columns' phase: of TOWER_PHASES within a column's angle (nearest the start first), the
+    # one that leaves out the fewest stations (a blade down in front of the tower) and whose
+    # first station the previous point reaches.
+    phases = [yaw0 + 2 * math.pi / columns * f for f in
+              sorted(np.arange(TOWER_PHASES) / TOWER_PHASES, key=lambda f: min(f, 1 - f))]
+    drops, firsts = [], []
+    for ph in phases:
+        P = np.vstack([column(ph + 2 * math.pi * j / columns)[0] for j in range(columns)])
+        ok = _filter_stations(site, pp, P)
+        drops.append(int((~ok).sum()))
+        firsts.append(P[int(np.argmax(ok))] if ok.any() else None)
+    for i in sorted(range(len(phases)), key=lambda i: (drops[i], i)):
+        if start_near is None or (firsts[i] is not None and connect(
+                site, np.asarray(start_near, float), firsts[i], pp.leg_required,
+                ground=pp.min_altitude) is not None):
+            yaw0 = phases[i]
+            break
+    else:
+        yaw0 = phases[0]
     comp = f"{turbine.id}/tower"
     for j in range(columns):
         ang = yaw0 + 2 * math.pi * j / columns
-        u = np.array([math.cos(ang), math.sin(ang), 0.0])
-        r = rb + (rt - rb) * zs / H
-        pos = turbine.base_xyz + (r + pp.standoff)[:, None] * u + zs[:, None] * Z
-        fwd = np.tile(-u, (nz, 1))
+        pos, fwd = column(ang)
         if j % 2 == 1:
             pos, fwd = pos[::-1], fwd[::-1]
-        keep = _filter_stations(site, pp, pos)  # level views: every gimbal reaches them
+        keep = _filter_stations(site, pp, pos, fwd)
         if (~keep).any():
             chunk.notes.append(f"{comp}: column {j + 1}: {int((~keep).sum())} station(s) too close "
                                "to a part: dropped")
