@@ -141,3 +141,25 @@ def test_plan_summary_numbers_fly_reads_are_checked(tmp_path, cli):
     write_plan(path, replace(line_plan(), summary={"battery_minutes": -3}))
     res = cli("fly", path, "--scenario", "tiny")
     assert res.exit_code == 3 and "battery_minutes" in res.stderr
+
+
+def test_legs_and_sorties_beyond_the_vehicle_are_refused_before_flying():
+    import time
+    from wtcli.errors import InputError
+    scn = default_scenario(**QUIET)
+    # One waypoint moved 100 km by hand: the leg into it would take 6667 s at 15 m/s.
+    plan = line_plan()
+    r = plan.routes[0]
+    pos = np.array(r.pos, float)
+    pos[3, 0] += 1e5
+    moved = replace(plan, routes=[replace(r, pos=pos)])
+    t0 = time.perf_counter()
+    with pytest.raises(InputError, match=r"edited\.json: routes\[0\]\.waypoints\[3\] is 100\d+ m"):
+        fly_plan(moved, scn, plan_source="edited.json")
+    assert time.perf_counter() - t0 < 5.0  # refused up front, not after minutes of flying
+    # Timed consistently (15 m/s) but 120 km in one sortie: 133 min against the battery's 45.
+    far = line_plan(length=120_000.0, speed=15.0, step=2_000.0)
+    with pytest.raises(InputError, match=r"sortie of at least 133 min"):
+        fly_plan(far, scn, plan_source="far.json")
+    # The same line at its own 120 m flies.
+    assert fly_plan(line_plan(), scn).automated.photos >= 0

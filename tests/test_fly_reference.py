@@ -43,7 +43,8 @@ def scenario(kind: str):
                 "shear_exponent": 0.0, "turbulence": {"model": "kaimal", "iec_class": "B"},
                 "gusts": {"rate_per_min": 4.0, "amplitude_ms": 3.0, "duration_s": 4.0},
                 "wake": False}
-    return default_scenario(wind=wind, positioning={"mode": "ideal"},
+    # Both vehicles fly the same timed set-point: the leash (which would retime ours) is off.
+    return default_scenario(wind=wind, positioning={"mode": "ideal"}, control={"leash_m": 0.0},
                             vehicle={"position_noise_m": 0.0, "velocity_noise_ms": 0.0})
 
 

@@ -530,6 +530,9 @@ PLAN_CASES = {
                        "routes[0].waypoints[3].speed"),
     "pos_text": (lambda d: d["routes"][0]["waypoints"][3].update(pos="x"), "invalid plan"),
     "no_routes": (lambda d: d.pop("routes"), "missing key 'routes'"),
+    # a waypoint moved 100 km by hand: refused before flying (the flight would take minutes)
+    "waypoint_100km": (lambda d: d["routes"][0]["waypoints"][5]["pos"].__setitem__(0, 1e5),
+                       "routes[0].waypoints[5] is"),
 }
 
 

@@ -16,7 +16,9 @@ limited by the vehicle's horizontal speed and climb/descent limits:
 
 ``step(k, pos, vel, true_pos)`` gets the control step index ``k`` (into the reference), the
 navigation estimate of position and velocity (what an autopilot sees) and the true position
-(what a pilot's eye sees, before their own misjudgement). The loop asks each controller whether
+(what a pilot's eye sees, before their own misjudgement); a position-holding controller also
+takes ``setpoint=(rx, ry, rz, vx, vy, vz)`` in place of the reference at ``k`` when the loop
+holds the set-point back for the vehicle (``control.leash_m``). The loop asks each controller whether
 it ``feeds_acceleration`` (adds the reference acceleration to the thrust) and whether it
 ``holds_position`` (then drifting ``divergence_m`` from the set-point is a failed flight).
 The arithmetic is written out per axis on floats: step() is called 50 times per simulated second.
@@ -100,9 +102,12 @@ class PidController(Controller):
         self.ix = self.iy = self.iz = 0.0
         self.vfx = self.vfy = self.vfz = 0.0
 
-    def step(self, k, pos, vel, true_pos):
-        rx, ry, rz = self.R[k]
-        vrx, vry, vrz = self.V[k]
+    def step(self, k, pos, vel, true_pos, setpoint=None):
+        if setpoint is None:
+            rx, ry, rz = self.R[k]
+            vrx, vry, vrz = self.V[k]
+        else:  # the set-point the flight loop holds back for the vehicle (control.leash_m)
+            rx, ry, rz, vrx, vry, vrz = setpoint
         mx, my, mz = pos
         mvx, mvy, mvz = vel
         ex, ey, ez = rx - mx, ry - my, rz - mz

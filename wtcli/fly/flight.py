@@ -21,7 +21,7 @@ from wtcli.console import StageProgress, stage_ticker
 from wtcli.errors import InputError, PlanError
 from wtcli.fly.pilot import manual_route, ou_series, pilot_inputs
 from wtcli.fly.scenario import Scenario
-from wtcli.fly.sim import G, Reference, Track, fly, make_controller, make_reference
+from wtcli.fly.sim import SETTLE_S, G, Reference, Track, fly, make_controller, make_reference
 from wtcli.fly.terrain import Ground
 from wtcli.fly.navigation import make_navigation, tower_shadow
 from wtcli.fly.wake import wake_series
@@ -33,6 +33,8 @@ from wtcli.plan_file import Plan, Route
 
 FLIGHT_KINDS = ("automated", "no_compensation", "fixed_pattern", "manual")
 SETTLED_M = 0.5
+LEASH_SLACK_S = 20.0  # room for the set-point to wait (control.leash_m): 20 s plus 15 %
+LEASH_SLACK_FRAC = 0.15  # of the route's planned time
 # Streams of the seeded random generator, so each source of randomness is independent.
 _WIND, _SENSOR, _PILOT, _WAKE = 1, 2, 3, 4
 
@@ -243,10 +245,14 @@ def fly_route(route: Route, scn: Scenario, ground: Ground, uav_index: int, mode:
     c = scn.control
     # The gimbal stops at its limits: a plan asking for more is flown (and photographed) there.
     lo, hi = scn.vehicle.gimbal_pitch_min_deg, scn.vehicle.gimbal_pitch_max_deg
+    # A set-point that waits for the vehicle (control.leash_m) needs room after the route's end:
+    # the flight stops once it got there and settled, so unused room costs only precomputation.
+    leashed = mode == "pid" and c.leash_m > 0
+    slack = LEASH_SLACK_S + LEASH_SLACK_FRAC * float(flown.t[-1] - flown.t[0]) if leashed else 0.0
     ref = make_reference(flown.t, flown.pos, flown.yaw_deg, np.clip(flown.gimbal_pitch_deg, lo, hi),
                          dt, c.reference_smoothing_s, c.reference_accel_ms2, c.corner_deviation_m,
                          speed=flown.speed, yaw_rate=scn.vehicle.yaw_rate_deg_s,
-                         pitch_rate=scn.vehicle.gimbal_rate_deg_s)
+                         pitch_rate=scn.vehicle.gimbal_rate_deg_s, settle_s=SETTLE_S + slack)
     n = len(ref.t)
     g_ref = ground.height(ref.pos)
     agl_ref = ref.pos[:, 2] - g_ref
@@ -272,6 +278,8 @@ def fly_route(route: Route, scn: Scenario, ground: Ground, uav_index: int, mode:
         wake, wake_info = wake_series(list(turbines), ref.pos, ref.t, wind.unit, speed,
                                       _rng(scn, uav_index, _WAKE))
     track = fly(ref, scn, wind, g_ref, make_controller(mode, ref, scn, pilot), nav, wake)
+    if track.progress is not None:  # the set-point's clock was held back: the reference flown
+        ref = ref.retimed(track.progress, dt)
 
     steps = ref.reach_step(np.nonzero(flown.photo)[0])  # photos when the set-point gets there
     yaw = track.yaw_deg[steps].copy()
@@ -629,6 +637,50 @@ class FlightReport:
         return [f"plan: {describe(v)}" for v in self.preflight] + self.automated.warnings()
 
 
+# A plan is refused before flying when a leg needs more than LEG_SLACK_FACTOR times its planned
+# time plus LEG_SLACK_S at the vehicle's top speeds (a planner's plan never does; a waypoint
+# moved by hand does), or a sortie needs more than SORTIE_BATTERY_FACTOR times the battery's
+# hover endurance at top speed: flying either would take minutes and prove nothing.
+LEG_SLACK_FACTOR, LEG_SLACK_S, SORTIE_BATTERY_FACTOR = 4.0, 30.0, 2.0
+
+
+def check_feasible(plan: Plan, scn: Scenario, ground: Ground, source: str) -> None:
+    """Raise InputError (exit 3) naming the first waypoint the vehicle cannot reach within the
+    plan's timing, or the first sortie far beyond its battery (see LEG_SLACK_FACTOR)."""
+    veh = scn.vehicle
+    endurance_s = veh.battery_wh * 3600.0 / veh.hover_power_w
+    for ri, r in enumerate(plan.routes):
+        P = np.asarray(r.pos, float)
+        if len(P) < 2:
+            continue
+        d = np.diff(P, axis=0)
+        t_min = np.maximum(np.hypot(d[:, 0], d[:, 1]) / veh.max_speed_ms,
+                           np.where(d[:, 2] > 0, d[:, 2] / veh.max_climb_ms,
+                                    -d[:, 2] / veh.max_descent_ms))
+        planned = np.maximum(np.diff(np.asarray(r.t, float)), 0.0)
+        bad = np.nonzero(t_min > LEG_SLACK_FACTOR * planned + LEG_SLACK_S)[0]
+        if len(bad):
+            i = int(bad[0])
+            raise InputError(
+                f"{source}: routes[{ri}].waypoints[{i + 1}] is {np.linalg.norm(d[i]):.0f} m from "
+                f"waypoints[{i}]: at least {t_min[i]:.0f} s at the vehicle's top speed "
+                f"({veh.max_speed_ms:g} m/s), the plan gives the leg {planned[i]:.1f} s; not "
+                "flown (a waypoint moved by hand?)")
+        # Sorties: split where the plan stands on the ground (a battery swap).
+        down = (P[:, 2] - ground.height(P)) < 0.5
+        start = 0
+        for j in range(1, len(P) + 1):
+            if j == len(P) or (down[j] and j > start):
+                need = float(t_min[start:j].sum()) if j > start else 0.0
+                if need > SORTIE_BATTERY_FACTOR * endurance_s:
+                    raise InputError(
+                        f"{source}: routes[{ri}].waypoints[{start}] to waypoints[{j - 1}]: a "
+                        f"sortie of at least {need / 60:.0f} min at the vehicle's top speed, the "
+                        f"battery ({veh.battery_wh:g} Wh) hovers {endurance_s / 60:.0f} min; "
+                        "not flown (a waypoint moved by hand?)")
+                start = j
+
+
 def fly_plan(plan: Plan, scn: Scenario, baselines: bool = False, fixed_plan: Plan | None = None,
              plan_source: str | None = None, progress: StageProgress | None = None) -> FlightReport:
     """Fly ``plan`` (and the baselines the scenario enables, if ``baselines``).
@@ -643,6 +695,7 @@ def fly_plan(plan: Plan, scn: Scenario, baselines: bool = False, fixed_plan: Pla
         raise PlanError(f"{plan_source or 'plan'}: the planned path runs inside the turbine "
                         f"{len(hits)} time(s), not flown: {shown_}{more}")
     ground = make_ground(plan, scn)
+    check_feasible(plan, scn, ground, plan_source or "plan")
     notes = []
     todo = [("automated", "pid", plan)]
     if baselines and scn.baselines.no_compensation:

@@ -97,6 +97,7 @@ class Control:
     corner_deviation_m: float
     reference_smoothing_s: float
     divergence_m: float
+    leash_m: float  # the set-point waits for the vehicle (0: off); see wtcli.fly.sim
 
 
 @dataclass(frozen=True)
@@ -195,7 +196,8 @@ _NUM = {
                 "motor_time_constant_s": (0.005, 1, False)},
     "control": {"physics_hz": (5, 1000, False), "control_hz": (1, 500, False),
                 "reference_accel_ms2": (0.1, 20, False), "corner_deviation_m": (0, 5, False),
-                "reference_smoothing_s": (0, 10, False), "divergence_m": (1, 10000, False)},
+                "reference_smoothing_s": (0, 10, False), "divergence_m": (1, 10000, False),
+                "leash_m": (0, 100, False)},
     "gains": {"kp": (0, 20, False), "ki": (0, 20, False), "kd": (0, 20, False),
               "derivative_filter_s": (0, 5, False), "integral_limit_ms": (0, 30, False)},
     "coverage": {"sample_spacing_m": (0.1, 5, False)},

@@ -22,6 +22,18 @@ it holds position (then drifting ``control.divergence_m`` from the set-point fai
 The controller sees the navigation estimate (the true state plus ``wtcli.fly.navigation``'s
 errors); deviation and clearance are measured on the truth.
 
+A set-point that waits for the vehicle (``control.leash_m`` = L > 0, position-holding controllers
+only): the set-point's clock runs at ``1 - e / L`` of real time, ``e`` the distance between the
+navigation estimate and the set-point, and stops while ``e >= L``, as PX4's trajectory generator
+does with ``MPC_XY_ERR_MAX`` (the integration speed of the trajectory is reduced linearly with the
+tracking error and stopped above it) and as ArduPilot's WPNAV leash holds its target back. So a
+gust that pushes the vehicle off does not also let the set-point run on into a corner the vehicle
+then cuts. The set-point's velocity and acceleration feed-forward are scaled by the clock's rate;
+the wake and the ground are taken where the set-point is; the flight runs until the set-point has
+reached the route's end and then ``SETTLE_S``; ``Track.progress`` says where along the reference
+(fractional index) the set-point was at each step, and ``Reference.retimed`` turns it into the
+reference actually flown.
+
 Physics runs at ``physics_hz`` (semi-implicit Euler), control at ``control_hz``; states are
 recorded at the control rate. The controller runs in plain Python per control step, the rigid
 body's physics steps compiled; everything else is precomputed or evaluated after the run.
@@ -59,6 +71,22 @@ class Reference:
     pitch_deg: np.ndarray  # (N,)
     end_index: int  # first index after the route's last waypoint time
     wp_index: np.ndarray  # (N,) fractional waypoint index of the set-point
+
+    def retimed(self, progress: np.ndarray, dt: float) -> "Reference":
+        """The set-point actually flown when its clock was held back: this reference sampled at
+        the fractional indices ``progress`` (one per control step, non-decreasing), velocities and
+        accelerations differentiated again; ``end_index`` is the first step at the route's end
+        (``len(progress)`` if it never got there)."""
+        prog = np.asarray(progress, float)
+        idx = np.arange(len(self.t), dtype=float)
+        pos = np.stack([np.interp(prog, idx, self.pos[:, i]) for i in range(3)], 1)
+        vel = np.gradient(pos, dt, axis=0) if len(pos) > 1 else np.zeros_like(pos)
+        acc = np.gradient(vel, dt, axis=0) if len(pos) > 1 else np.zeros_like(pos)
+        at_end = np.nonzero(prog >= self.end_index - 1e-9)[0]
+        return Reference(self.t[0] + np.arange(len(prog)) * dt, pos, vel, acc,
+                         np.interp(prog, idx, self.yaw_deg), np.interp(prog, idx, self.pitch_deg),
+                         int(at_end[0]) if len(at_end) else len(prog),
+                         np.interp(prog, idx, self.wp_index))
 
     def reach_step(self, waypoint: np.ndarray) -> np.ndarray:
         """First step at which the set-point reaches each waypoint index."""
@@ -101,12 +129,13 @@ def corner_speeds(pos: np.ndarray, v_leg: np.ndarray, accel: float, corner_m: fl
 def make_reference(t_wp: np.ndarray, pos_wp: np.ndarray, yaw_wp: np.ndarray, pitch_wp: np.ndarray,
                    dt: float, smoothing_s: float, accel: float = 2.5, corner_m: float = 0.05,
                    speed: np.ndarray | None = None, yaw_rate: float | None = None,
-                   pitch_rate: float | None = None) -> Reference:
+                   pitch_rate: float | None = None, settle_s: float = SETTLE_S) -> Reference:
     """The set-point an autopilot's mission mode follows: the planned polyline exactly, each leg
     at the planned speed (its length over its planned duration) with trapezoidal speed changes
     at ``accel`` and corners taken at the junction-deviation speed; zero-length legs (hover,
     turning on the spot) keep their planned duration. Time therefore runs a little behind the
-    plan at corners; photos are triggered when the set-point reaches their waypoint."""
+    plan at corners; photos are triggered when the set-point reaches their waypoint. The set-point
+    then hovers at the last waypoint for ``settle_s`` (room for a clock held back by a leash)."""
     tw = np.asarray(t_wp, float)
     P = np.asarray(pos_wp, float)
     seg = np.diff(P, axis=0)
@@ -147,7 +176,7 @@ def make_reference(t_wp: np.ndarray, pos_wp: np.ndarray, yaw_wp: np.ndarray, pit
     t_leg = np.where(moving, t_move + dwell, dtp)
     T = np.concatenate([[tw[0]], tw[0] + np.cumsum(t_leg)])
     n_end = int(math.ceil((T[-1] - T[0]) / dt)) + 1
-    n = n_end + int(round(SETTLE_S / dt))
+    n = n_end + int(round(max(settle_s, 0.0) / dt))
     t = T[0] + np.arange(n) * dt
     j = np.clip(np.searchsorted(T, t, side="right") - 1, 0, len(L) - 1)
     tau = np.clip(t - T[j], 0.0, t_leg[j])
@@ -186,6 +215,7 @@ class Track:
     wind: np.ndarray  # (N, 3) wind at the vehicle
     yaw_deg: np.ndarray  # (N,) camera heading actually flown
     pitch_deg: np.ndarray  # (N,) gimbal elevation actually flown
+    progress: np.ndarray | None = None  # (N,) the set-point's fractional reference index
 
     def __post_init__(self) -> None:
         n = len(self.t)
@@ -249,16 +279,48 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
     tx = ty = tz = 0.0
     wx = wy = wz = 0.0
     lost2 = ctl.divergence_m ** 2 if controller.holds_position else math.inf
+    leash = float(getattr(ctl, "leash_m", 0.0) or 0.0) if controller.holds_position else 0.0
+    V = ref.vel.tolist()
+    sig = 0.0  # the set-point's fractional index into the reference (leash only)
+    last_i = n - 1
+    end_i, settle_n, k_end = ref.end_index, int(round(SETTLE_S / dt)), -1
+    prog = []
 
     for k in range(n):
         nx, ny, nz = npos[k]
         mvx, mvy, mvz = nvel[k]
-        cx, cy, cz = step(k, (px + nx, py + ny, pz + nz), (vx + mvx, vy + mvy, vz + mvz),
-                          (px, py, pz))
-        arx, ary, arz = A[k]
-        agl = pz - GR[k]
+        ex_p, ey_p, ez_p = px + nx, py + ny, pz + nz
+        if leash:
+            i = int(sig)
+            j1 = i + 1 if i < last_i else i
+            f = sig - i
+            g = 1.0 - f
+            r0, r1, v0, v1 = R[i], R[j1], V[i], V[j1]
+            rx = g * r0[0] + f * r1[0]
+            ry = g * r0[1] + f * r1[1]
+            rz = g * r0[2] + f * r1[2]
+            e = math.sqrt((rx - ex_p) ** 2 + (ry - ey_p) ** 2 + (rz - ez_p) ** 2)
+            rate = 1.0 - e / leash
+            rate = 0.0 if rate < 0.0 else rate
+            sp = (rx, ry, rz, rate * (g * v0[0] + f * v1[0]), rate * (g * v0[1] + f * v1[1]),
+                  rate * (g * v0[2] + f * v1[2]))
+            cx, cy, cz = step(k, (ex_p, ey_p, ez_p), (vx + mvx, vy + mvy, vz + mvz),
+                              (px, py, pz), sp)
+            a0, a1 = A[i], A[j1]
+            r2 = rate * rate
+            arx, ary, arz = (r2 * (g * a0[0] + f * a1[0]), r2 * (g * a0[1] + f * a1[1]),
+                             r2 * (g * a0[2] + f * a1[2]))
+            kr = i  # the wake, ground and camera set-points where the set-point is
+            prog.append(sig)
+            sig = sig + rate if sig + rate < last_i else float(last_i)
+        else:
+            cx, cy, cz = step(k, (ex_p, ey_p, ez_p), (vx + mvx, vy + mvy, vz + mvz),
+                              (px, py, pz))
+            arx, ary, arz = A[k]
+            kr, rate = k, 1.0
+        agl = pz - GR[kr]
         shear = wspd * ((agl if agl > 1.0 else 1.0) / href) ** alpha if wspd > 0 else 0.0
-        kx, ky, kz = WK[k]
+        kx, ky, kz = WK[kr]
         mwx, mwy = shear * ux_ + kx, shear * uy_ + ky
         if rigid_model:
             kernel(S, cx, cy, cz, arx, ary, arz, W, k * sub, sub, mwx, mwy, kz, P, dtp, last)
@@ -292,9 +354,9 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
                 py += vy * dtp
                 pz += vz * dtp
         # Camera heading and gimbal: rate feed-forward plus first-order tracking, rate-limited.
-        d = YF[k] + (YR[k] - yaw) / yr_tau
+        d = rate * YF[kr] + (YR[kr] - yaw) / yr_tau
         yaw += (yr_rate if d > yr_rate else -yr_rate if d < -yr_rate else d) * dt
-        d = PF[k] + (PR[k] - pit) / gp_tau
+        d = rate * PF[kr] + (PR[kr] - pit) / gp_tau
         pit += (gp_rate if d > gp_rate else -gp_rate if d < -gp_rate else d) * dt
         out_p.append((px, py, pz))
         out_v.append((vx, vy, vz))
@@ -303,14 +365,26 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
         out_y.append(yaw)
         out_g.append(pit)
         if k % 25 == 0:
-            _check_divergence(ref, k, name, (px, py, pz), lost2, ctl.divergence_m)
+            _check_divergence(ref, kr, name, (px, py, pz), lost2, ctl.divergence_m)
+        if leash:
+            if k_end < 0 and prog[-1] >= end_i - 1e-9:
+                k_end = k
+            if k_end >= 0 and k - k_end >= settle_n:
+                break  # at the end and settled: the rest of the reference is slack
+    if leash and k_end < 0:
+        raise SimulationError(
+            f"the set-point waited {(n - end_i) * dt:.0f} s for the vehicle and the route is still "
+            f"unfinished ({name} controller, control.leash_m = {leash:g}): the wind may exceed "
+            "what the vehicle can hold")
+    m = len(out_p)
     pos = np.array(out_p)
     if not np.isfinite(pos).all() or np.abs(pos).max() >= DIVERGED_M:
         bad = int(np.argmax(~np.isfinite(pos).all(1) | (np.abs(pos).max(1) >= DIVERGED_M)))
         raise SimulationError(f"flight diverged at t={ref.t[bad]:.1f} s ({name} controller); "
                               "check the gains and limits of the scenario")
-    return Track(t=ref.t.copy(), pos=pos, vel=np.array(out_v), thrust=np.array(out_t),
-                 wind=np.array(out_w), yaw_deg=np.array(out_y), pitch_deg=np.array(out_g))
+    return Track(t=ref.t[:m].copy(), pos=pos, vel=np.array(out_v), thrust=np.array(out_t),
+                 wind=np.array(out_w), yaw_deg=np.array(out_y), pitch_deg=np.array(out_g),
+                 progress=np.array(prog) if leash else None)
 
 
 def _check_divergence(ref: Reference, k: int, name: str, p: tuple[float, float, float],
