@@ -163,3 +163,20 @@ def test_legs_and_sorties_beyond_the_vehicle_are_refused_before_flying():
         fly_plan(far, scn, plan_source="far.json")
     # The same line at its own 120 m flies.
     assert fly_plan(line_plan(), scn).automated.photos >= 0
+
+
+def test_a_margin_below_the_documented_one_for_the_positioning_is_a_plan_warning():
+    from wtcli.fly.flight import DOCUMENTED_MARGIN_M
+    plan = line_plan()
+    need = DOCUMENTED_MARGIN_M["gnss"]
+    gnss = default_scenario(positioning={"mode": "gnss"})
+    thin = fly_plan(replace(plan, summary={"tracking_margin_m": need - 0.5}), gnss)
+    said = [w for w in thin.warnings() if w.startswith("plan: tracking_margin_m")]
+    assert len(said) == 1 and f"{need:g} m documented for gnss" in said[0], said
+    wide = fly_plan(replace(plan, summary={"tracking_margin_m": need}), gnss)
+    assert not any(w.startswith("plan: tracking_margin_m") for w in wide.warnings())
+    # RTK that may lose its fix near the tower is held to RTK float's margin.
+    float_need = DOCUMENTED_MARGIN_M["rtk_float"]
+    rtk = default_scenario(positioning={"mode": "rtk_fixed", "rtk_degrades_near_tower": True})
+    rep = fly_plan(replace(plan, summary={"tracking_margin_m": float_need - 0.1}), rtk)
+    assert any(f"documented for rtk_float" in w for w in rep.warnings())
