@@ -33,8 +33,8 @@ from wtcli.plan_file import Plan, Route
 
 FLIGHT_KINDS = ("automated", "no_compensation", "fixed_pattern", "manual")
 SETTLED_M = 0.5
-LEASH_SLACK_S = 20.0  # room for the set-point to wait (control.leash_m): 20 s plus 15 %
-LEASH_SLACK_FRAC = 0.15  # of the route's planned time
+LEASH_SLACK_S = 30.0  # room for the set-point to wait (control.leash_m): 30 s plus 30 %
+LEASH_SLACK_FRAC = 0.30  # of the route's planned time
 # Streams of the seeded random generator, so each source of randomness is independent.
 _WIND, _SENSOR, _PILOT, _WAKE = 1, 2, 3, 4
 

@@ -24,8 +24,8 @@ errors); deviation and clearance are measured on the truth.
 
 A set-point that waits for the vehicle (``control.leash_m`` = L > 0, position-holding controllers
 only): the set-point's clock runs at ``1 - e / L`` of real time, ``e`` the distance between the
-navigation estimate and the set-point, and stops while ``e >= L``, as PX4's trajectory generator
-does with ``MPC_XY_ERR_MAX`` (the integration speed of the trajectory is reduced linearly with the
+navigation estimate and the set-point (filtered over ``LEASH_FILTER_S``), and stops while
+``e >= L``, as PX4's trajectory generator does with ``MPC_XY_ERR_MAX`` (the integration speed of the trajectory is reduced linearly with the
 tracking error and stopped above it) and as ArduPilot's WPNAV leash holds its target back. So a
 gust that pushes the vehicle off does not also let the set-point run on into a corner the vehicle
 then cuts. The set-point's velocity and acceleration feed-forward are scaled by the clock's rate;
@@ -57,6 +57,7 @@ from wtcli.fly.wind import WindSeries
 G = 9.81
 SETTLE_S = 3.0  # hover at the last waypoint after the reference ends
 DIVERGED_M = 1e5
+LEASH_FILTER_S = 0.5  # first-order filter on the leash's error (an EKF's estimate is smooth)
 
 
 @dataclass(frozen=True)
@@ -282,6 +283,7 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
     leash = float(getattr(ctl, "leash_m", 0.0) or 0.0) if controller.holds_position else 0.0
     V = ref.vel.tolist()
     sig = 0.0  # the set-point's fractional index into the reference (leash only)
+    ef, lf = 0.0, dt / (LEASH_FILTER_S + dt)
     last_i = n - 1
     end_i, settle_n, k_end = ref.end_index, int(round(SETTLE_S / dt)), -1
     prog = []
@@ -300,7 +302,8 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
             ry = g * r0[1] + f * r1[1]
             rz = g * r0[2] + f * r1[2]
             e = math.sqrt((rx - ex_p) ** 2 + (ry - ey_p) ** 2 + (rz - ez_p) ** 2)
-            rate = 1.0 - e / leash
+            ef += lf * (e - ef)  # the estimate's step-to-step noise is not a tracking error
+            rate = 1.0 - ef / leash
             rate = 0.0 if rate < 0.0 else rate
             sp = (rx, ry, rz, rate * (g * v0[0] + f * v1[0]), rate * (g * v0[1] + f * v1[1]),
                   rate * (g * v0[2] + f * v1[2]))
