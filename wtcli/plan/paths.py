@@ -30,6 +30,7 @@ every turbine; every leg ``required - step/2`` (the lower bound's sampling slack
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from dataclasses import dataclass, field
@@ -965,6 +966,23 @@ GAP_BIN_AREA = 0.05  # m^2: a stretch missing less is not worth a view
 GAP_POINTS = 150  # missed samples of a blade the search is asked about at most
 
 
+@functools.lru_cache(maxsize=32)
+def _cone_dirs(ring: float, around: float, lim: float) -> tuple[np.ndarray, np.ndarray]:
+    """The gap search's viewing directions round a sample's normal, in degrees: the normal, then
+    rings every ``ring`` deg off it below ``lim``, each every ``around`` deg round it (the same
+    grids are asked for again and again: made once)."""
+    dirs = [(0.0, 0.0)] + [(th, ph) for th in np.arange(ring, lim, ring)
+                            for ph in np.arange(0.0, 360.0, around)]
+    th, ph = np.array([d[0] for d in dirs]), np.array([d[1] for d in dirs])
+    th.flags.writeable = ph.flags.writeable = False
+    return th, ph
+
+
+def _cross_z(v: np.ndarray) -> np.ndarray:
+    """``np.cross(v, Z)`` for rows of v, without its per-call overhead: (v_y, -v_x, 0)."""
+    return np.stack([v[:, 1], -v[:, 0], np.zeros(len(v))], axis=1)
+
+
 def _clear_along_rays(site: Site, C: np.ndarray, R: np.ndarray, pp: PassParams) -> np.ndarray:
     """(rays, dists) bool: which candidates C (rays, dists, 3), at distances R along each ray,
     are above the minimum altitude and keep ``pp.required`` from every part.
@@ -1013,21 +1031,20 @@ def gap_views(turbine: Turbine, pts: np.ndarray, nrm: np.ndarray, area: np.ndarr
     # The views that clear are a thin shell (clearance vs GSD): the fewer samples are missed,
     # the finer the grid each is searched with, within one budget of candidates.
     for ring, around, n_dist in grids:
-        dirs = [(0.0, 0.0)] + [(th, ph) for th in np.arange(ring, lim, ring)
-                                for ph in np.arange(0.0, 360.0, around)]
-        if len(pts) * len(dirs) * n_dist <= budget:
+        th_deg, ph_deg = _cone_dirs(ring, around, lim)
+        if len(pts) * len(th_deg) * n_dist <= budget:
             break
     R = np.linspace(pp.min_standoff, max_distance, n_dist)
-    n_seeds = max(1, min(len(pts), budget // (len(dirs) * len(R))))
+    n_seeds = max(1, min(len(pts), budget // (len(th_deg) * len(R))))
     seeds = np.unique(np.linspace(0, len(pts) - 1, n_seeds).round().astype(int))
     S, N = pts[seeds], nrm[seeds]
-    a = np.cross(N, Z)
+    a = _cross_z(N)
     flat = np.linalg.norm(a, axis=1) < 1e-6
     a[flat] = np.cross(N[flat], [1.0, 0.0, 0.0])
     a /= np.linalg.norm(a, axis=1, keepdims=True)
     b = np.cross(N, a)
-    th = np.radians([d[0] for d in dirs])[None, :, None]
-    ph = np.radians([d[1] for d in dirs])[None, :, None]
+    th = np.radians(th_deg)[None, :, None]
+    ph = np.radians(ph_deg)[None, :, None]
     U = np.cos(th) * N[:, None] + np.sin(th) * (np.cos(ph) * a[:, None] + np.sin(ph) * b[:, None])
     C = S[:, None, None, :] + R[None, None, :, None] * U[:, :, None, :]  # (seed, dir, dist, 3)
     target = np.broadcast_to(S[:, None, None, :], C.shape).reshape(-1, 3)
@@ -1037,7 +1054,7 @@ def gap_views(turbine: Turbine, pts: np.ndarray, nrm: np.ndarray, area: np.ndarr
         return []
     F = target - C
     F /= np.linalg.norm(F, axis=1, keepdims=True)
-    right = np.cross(F, Z)
+    right = _cross_z(F)
     rn = np.linalg.norm(right, axis=1, keepdims=True)
     keep = rn[:, 0] > 1e-3  # straight up or down: the yaw is ill-defined, leave those out
     keep &= pp.aim_ok(F)
