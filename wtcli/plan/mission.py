@@ -180,10 +180,7 @@ def turbine_chunks(t: Turbine, site: Site, pp: PassParams, mission: Mission,
         out = []
         try:
             for c in previous:
-                # A ring blade's passes already see every section: what it misses is hidden
-                # (the root behind the hub), which splitting does not reach; gap views do.
-                if c.name.startswith("blade") and int(c.name[5:]) - 1 in (split or {}) \
-                        and not c.pattern.startswith("ring"):
+                if c.name.startswith("blade") and int(c.name[5:]) - 1 in (split or {}):
                     k = int(c.name[5:]) - 1
                     c = blade_chunk(t, k, site, pp, f"{t.id}/blade{k + 1}", split[k])
                 out.append(c)
@@ -642,11 +639,22 @@ def _chunks(job: tuple) -> list[Chunk]:
             if low:
                 split[int(b[5:]) - 1] = low
         if split:
+            rings = {int(c.name[5:]) - 1: c for c in chunks
+                     if c.name.startswith("blade") and c.pattern.startswith("ring")}
             chunks = turbine_chunks(t, site, pp, mission, split, previous=chunks)
             cov = _blade_coverage_from_chunks(t, chunks, mission.camera, gsd_eval,
                                               s.coverage_spacing_m, s.max_incidence_deg)
-            views.update(gap_plan(t, cov.samples, cov.covered, site, pp, s.max_incidence_deg,
-                                  reach, set(split))[0])
+            more, covered2 = gap_plan(t, cov.samples, cov.covered, site, pp, s.max_incidence_deg,
+                                      reach, set(split))
+            # A ring blade short on a side is flown side by side instead (those sides split)
+            # only where that sees more (its worst side, with the extra views either way):
+            # else the shorter ring.
+            again = Coverage(cov.samples, covered2, cov.best_gsd_mm).by_blade_side()
+            keep = {k for k in rings if min(predicted[f"blade{k + 1}"].values())
+                    >= min(again[f"blade{k + 1}"].values())}
+            chunks = [rings[int(c.name[5:]) - 1] if c.name.startswith("blade")
+                      and int(c.name[5:]) - 1 in keep else c for c in chunks]
+            views.update({k: v for k, v in more.items() if k not in keep})
         add_gap_views(chunks, views, site, pp)
         # The views were chosen on what the passes missed; checked on the converged figure,
         # a side still below min_side_coverage gets views for what is left, round by round.

@@ -331,7 +331,8 @@ def _side_points(turbine: Turbine, k: int, s: np.ndarray, gamma: np.ndarray,
 # side), tried fewest first: four on the diagonals between adjacent sides (slender blades), five
 # (wide or round sections: four leave the side centres too far or too oblique).
 RINGS = ((45.0, 135.0, 225.0, 315.0), (0.0, 72.0, 144.0, 216.0, 288.0))
-RING_SHIFT_DEG = (0.0, 10.0, -10.0, 20.0, -20.0, 30.0, -30.0)  # a blocked station's turns
+RING_SHIFT_DEG = (0.0, 10.0, -10.0, 20.0, -20.0, 30.0, -30.0, 45.0, -45.0, 60.0, -60.0, 75.0,
+                  -75.0)  # a blocked station's turns, least first
 RING_MAX_DROPPED = 3  # blocked stations a ring pass leaves out; more: flown side by side
 RING_SECTION_POINTS = 96  # points round a section a ring's views must all see
 RING_MARGIN_DEG = 3.0  # kept from the incidence limit when judging a section (flight error)
@@ -409,9 +410,10 @@ def _ring_passes(turbine: Turbine, k: int, site: Site, pp: PassParams, label: st
             pos0 = pos.copy()
             blocked = (site.clearance(pos, pp.required) < pp.required) | \
                 ~site.above_ground(pos, pp.min_altitude) | ~pp.aim_ok(fwd)
-            for j in np.nonzero(blocked)[0]:  # (near the hub) turned or moved out until clear
-                D, X = np.meshgrid(np.radians(RING_SHIFT_DEG),
-                                   np.arange(e[j], pp.max_standoff + 1e-9, 0.25), indexing="ij")
+            for j in np.nonzero(blocked)[0]:  # (near the hub) turned or moved until clear
+                xs = np.arange(pp.min_standoff, pp.max_standoff + 1e-9, 0.25)
+                D, X = np.meshgrid(np.radians(RING_SHIFT_DEG), xs[np.argsort(np.abs(xs - e[j]))],
+                                   indexing="ij")
                 D, X = D.ravel(), X.ravel()
                 cp, cf = _side_points(turbine, k, np.full(len(D), S[j]), gg[j] + D, X)
                 ok = (site.clearance(cp, pp.required) >= pp.required) & \
@@ -797,6 +799,8 @@ def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams) -> Chunk:
                                + (f" or beyond {pp.gimbal_text()}" if aimless else "") + ": dropped")
         if keep.any():
             flown.append((pos[keep], fwd[keep]))
+    if not flown:
+        return chunk
     # The faces in the order and directions with the shortest joins (all of them tried; a join
     # through the nacelle counts twice its length plus 20 m: it is flown round).
     ends = np.array([f[0][x] for f in flown for x in (0, -1)])  # face i: start 2i, end 2i + 1
