@@ -77,7 +77,24 @@ def command(script: str | Path | None = None, argv: list[str] | None = None) -> 
     script = Path(script or sys.argv[0]).resolve()
     shown = script.relative_to(ROOT) if script.is_relative_to(ROOT) else script
     args = sys.argv[1:] if argv is None else list(argv)
-    return shlex.join(["python", str(shown), *args])
+    return shlex.join(["python", str(shown), *_without_out(args)])
+
+
+def _without_out(args: list[str]) -> list[str]:
+    """``args`` less ``--out PATH`` and ``--log PATH``: where a run wrote its files does not change
+    its figures, and a scratch path in the docs would send a reader to a file they do not have."""
+    kept, skip = [], False
+    for a in args:
+        if skip:
+            skip = False
+        elif a in _OUTPUT_FLAGS:
+            skip = True
+        elif not a.startswith(tuple(f + "=" for f in _OUTPUT_FLAGS)):
+            kept.append(a)
+    return kept
+
+
+_OUTPUT_FLAGS = ("--out", "--log")
 
 
 def now_utc() -> str:

@@ -168,6 +168,16 @@ SECTIONS: tuple[Section, ...] = (
            "{:.1%} against {:.1%}")),
         adopt='save("plan_benchmark", res)'),
     Section(
+        "Planning time: where it goes", "plan_benchmark_coverage_share",
+        "python benchmarks/plan_benchmark.py --coverage-share 10",
+        "One process plans a random 10-turbine site (as the planning-time benchmark draws them) under "
+        "cProfile; the "
+        "CPU seconds inside the coverage measure (`turbine_coverage`) and inside the gap search "
+        "(`gap_plan`, which calls the measure too, so the two overlap) against the whole plan.",
+        (F("whole plan, CPU", ("cpu_seconds", "turbines"), "{:.2f} s ({} turbines)"),
+         F("coverage measure, CPU", ("coverage_cpu_seconds", "coverage_calls"), "{:.2f} s ({} calls)"),
+         F("gap search, CPU", ("gap_search_cpu_seconds",), "{:.2f} s"))),
+    Section(
         "Photo to plan latency", "plan_latency",
         "python benchmarks/plan_latency.py --accuracy 40",
         "`wtinspect plan turbines.yaml T1=PHOTO` on one turbine (the sample site's T1) in a fresh "

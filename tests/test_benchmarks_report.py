@@ -40,8 +40,17 @@ def test_every_results_file_is_shown_and_says_how_it_was_made(report):
     for path in sorted((ROOT / "benchmarks" / "results").glob("*.json")):
         assert path.stem in shown, f"{path.name}: no section of benchmarks/report.py shows it"
         m = json.loads(path.read_text())["measured"]
-        assert m["command"].startswith(f"python benchmarks/{path.stem}.py"), path.name
+        # benchmarks/NAME.py writes NAME.json; a second figure set of one script, NAME_PART.json
+        python, script = m["command"].split()[:2]
+        assert python == "python" and script.startswith("benchmarks/"), path.name
+        assert (ROOT / script).is_file() and path.stem.startswith(Path(script).stem), path.name
+        assert "/tmp" not in m["command"], f"{path.name}: a scratch path in its command"
         assert m["date"] and m["machine"]["summary"], path.name
+
+
+def test_the_command_shown_leaves_out_where_files_were_written(results):
+    assert results._without_out(["10", "--out", "/tmp/x.json", "--log=/tmp/l", "--jobs", "2"]) \
+        == ["10", "--jobs", "2"]
 
 
 def test_a_benchmark_not_run_yet_gives_its_command_not_a_number(report, tmp_path):
