@@ -180,3 +180,18 @@ def test_a_margin_below_the_documented_one_for_the_positioning_is_a_plan_warning
     rtk = default_scenario(positioning={"mode": "rtk_fixed", "rtk_degrades_near_tower": True})
     rep = fly_plan(replace(plan, summary={"tracking_margin_m": float_need - 0.1}), rtk)
     assert any(f"documented for rtk_float" in w for w in rep.warnings())
+
+
+def test_wind_above_the_documented_limit_at_hub_height_is_a_warning():
+    from wtcli.fly.flight import SAFE_HUB_WIND_MS, hub_wind_ms
+    plan = line_plan()
+    hub = max(t.hub_height for t in plan.turbines)
+    # The limit is on the mean at the hub: 7 m/s at 10 m grows with the power law to the hub.
+    scn = default_scenario(wind={"speed_ms": 7.0, "reference_height_m": 10.0, "shear_exponent": 0.2})
+    assert hub_wind_ms(scn, plan.turbines) == pytest.approx(7.0 * (hub / 10.0) ** 0.2)
+    for v, warned in ((SAFE_HUB_WIND_MS, False), (12.0, True)):
+        scn = default_scenario(wind={"speed_ms": v, "reference_height_m": hub})
+        said = [w for w in fly_plan(plan, scn).warnings() if w.startswith("wind:")]
+        assert (len(said) == 1) is warned, (v, said)
+        if warned:
+            assert "12.0 m/s mean at hub height" in said[0] and "do not fly" in said[0]
