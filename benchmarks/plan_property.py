@@ -4,11 +4,13 @@ covered.
 
 Random sites (``random_site``): 1-4 turbines spread over up to 10 km, 1-5 blades, rotor radius
 20-75 m, any yaw; a quarter with a blade pointing straight down in front of the tower, a quarter
-with a wide tower (base radius 3-6 m); a third of the fleets with a gimbal that looks up only
-20-60 deg (some also down only to -60); safe distance 2.5-6 m, tracking margin 0-1.5 m, target
-GSD 1.2-2.5 mm/px; 1-3 UAVs with a battery that reaches the far side of the site (25 min plus
-the round trip at cruise speed); everything else the packaged defaults (min_side_coverage 0.9). Each
-site goes through the turbines.yaml path (``mission_from_dict``) and ``plan_mission``.
+with a wide tower (base radius 3-6 m; nine in ten with an overhang that lets the blades pass
+it, one in ten with 0.06-0.1 R, which a blade may cut into: refused, exit 4); a third of
+the fleets with a gimbal that looks up only 20-60 deg (some also down only to -60); safe
+distance 2.5-6 m, tracking margin 0-1.5 m, target GSD 1.2-2.5 mm/px; 1-3 UAVs with a battery
+that reaches the far side of the site (25 min plus the round trip at cruise speed); everything
+else the packaged defaults (min_side_coverage 0.9). Each site goes through the turbines.yaml
+path (``mission_from_dict``) and ``plan_mission``.
 
 Every plan written is checked without the planner's clearance code (``independent_clearance``:
 closed-form distances to the hub sphere, nacelle box and tower frustum, and the blade surface
@@ -77,6 +79,10 @@ def random_site(rng: np.random.Generator) -> dict:
         if rng.random() < 0.25:  # a wide tower
             rb = float(rng.uniform(3, 6))
             t["tower"] = {"base_radius_m": rb, "top_radius_m": float(rb * rng.uniform(0.6, 1.0))}
+            if rng.random() < 0.9:  # with the overhang a real design would give it
+                t["overhang_m"] = float(rb + 0.04 * R + rng.uniform(0.5, 3.0))
+            else:  # a datasheet's 0.06-0.1 R, too short for this tower: a blade may cut into it
+                t["overhang_m"] = float(R * rng.uniform(0.06, 0.1))
         turbines.append(t)
     # One launch point serves the whole site: a battery that reaches the far side and back at
     # cruise speed (8 m/s) on top of the default 25 min, as a wide site needs.

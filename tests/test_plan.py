@@ -1168,7 +1168,11 @@ def test_the_suites_leg_samples_reach_every_part():
     suite's turbines (low hubs, blades straight up included) lies inside it."""
     pp = _plan_property()
     for seed in range(8):
-        for t in mission_from_dict(pp.random_site(np.random.default_rng(seed))).turbines:
+        try:
+            m = mission_from_dict(pp.random_site(np.random.default_rng(seed)))
+        except ConfigError:  # a blade that would cut into its tower: refused, nothing to fly
+            continue
+        for t in m.turbines:
             c, r = pp.enclosing_sphere(t)
             assert np.linalg.norm(t.surface_samples(1.0).points - c, axis=1).max() <= r
 
@@ -1217,6 +1221,32 @@ def test_turbines_on_top_of_each_other_are_refused_naming_both():
                                 {"id": "T3", "position": [360, 0, 0]}))
     m = mission_from_dict(_site({}, {"id": "T2", "position": [91, 0, 0]}))  # rotors just apart
     assert len(m.turbines) == 2
+
+
+def test_a_turbine_whose_blade_would_cut_into_its_tower_is_refused():
+    """Property site 25's T1: a 5.3 m tower, its hub 5.27 m ahead of the tower axis. Its one
+    blade pointed down and passed into the tower; the plan then rested on a blade that is not
+    there. Refused at any stopped azimuth: the rotor could not turn past the tower either."""
+    wide = {"hub_height_m": 42.0, "rotor_diameter_m": 63.8, "blades": 1, "blade_pitch_deg": 89.7,
+            "tower": {"base_radius_m": 5.3, "top_radius_m": 5.12}, "overhang_m": 5.27}
+    for az in ([270.0], [90.0]):
+        with pytest.raises(ConfigError, match=r"turbines\[0\]: a blade pointing down would pass "
+                           r"1\.\d\d m into the tower .*overhang_m"):
+            mission_from_dict(_site({**wide, "blade_azimuths_deg": az}))
+    # Given the overhang such a tower needs, it plans as any other.
+    t = mission_from_dict(_site({**wide, "overhang_m": 7.5})).turbines[0]
+    assert t.overhang == 7.5
+    # The packaged proportions clear their own tower, small rotors on tall towers included.
+    for d, hub in ((5, 250), (10, 80), (60, 250), (90, 80), (300, 160)):
+        mission_from_dict(_site({"rotor_diameter_m": d, "hub_height_m": hub}))
+    # Datasheet turbines without the shaft tilt and cone the model lacks: NREL 5 MW (Jonkman et
+    # al. 2009, NREL/TP-500-38060) and DTU 10 MW (Bak et al. 2013) clear their towers.
+    for hub, d, rb, rt, over, root, mx, at in ((90.0, 126.0, 3.0, 1.935, 5.0, 3.542, 4.652, 0.23),
+                                              (119.0, 178.3, 4.15, 2.75, 7.1, 5.38, 6.2, 0.22)):
+        mission_from_dict(_site({"hub_height_m": hub, "rotor_diameter_m": d, "overhang_m": over,
+                                 "tower": {"base_radius_m": rb, "top_radius_m": rt},
+                                 "blade": {"root_chord_m": root, "max_chord_m": mx,
+                                           "max_chord_span_fraction": at}}))
 
 
 def test_a_rotor_a_little_uneven_is_accepted():

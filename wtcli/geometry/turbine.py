@@ -99,7 +99,11 @@ class Turbine:
         if self.tower_top_radius is None:
             object.__setattr__(self, "tower_top_radius", 0.6 * self.tower_base_radius)
         if self.overhang is None:
-            object.__setattr__(self, "overhang", 0.5 * self.nacelle_length + 0.8 * self.hub_radius)
+            # At least what lets the widest blade section pass the tower's base radius: a small
+            # rotor on a tall tower would otherwise turn through its own tower.
+            object.__setattr__(self, "overhang", max(
+                0.5 * self.nacelle_length + 0.8 * self.hub_radius,
+                self.tower_base_radius + 0.5 * max(self.blade_root_chord, self.blade_max_chord) + 0.5))
         if self.nacelle_ahead is None:
             object.__setattr__(self, "nacelle_ahead", NACELLE_AHEAD_OF_LENGTH * self.nacelle_length)
         object.__setattr__(self, "base", tuple(float(x) for x in self.base))

@@ -338,6 +338,35 @@ def _apart(turbines: list[Turbine], where: str) -> None:
                     f"({r[a]:g} + {r[b]:g} m): a duplicate entry or a wrong position")
 
 
+def _blades_clear_the_tower(t: Turbine, where: str) -> None:
+    """A blade turned to point straight down must pass the tower: a turbine whose modelled blade
+    would cut into its tower cannot turn, so its tower, overhang or blade sizes are wrong (and
+    a plan around it would rest on a surface that is not there). Checked at every azimuth's
+    worst, straight down, so angles read later from a photo cannot change the answer."""
+    down = replace(t, azimuths_deg=(270.0,))
+    d, c, n = down.blade_frame(0)
+    r0 = down.blade_root_offset
+    f = np.linspace(0.0, 1.0, max(2, int((down.tip_radius - r0) / 0.1) + 1))[:, None]
+    A, B = down.blade_semi_axes(f)
+    a = np.linspace(0.0, 2 * np.pi, 72, endpoint=False)[None, :]
+    # The whole modelled outline (surface_samples leaves out what is buried in another part).
+    pts = (down.hub_center + (r0 + f * (down.tip_radius - r0))[..., None] * d
+           + (A * np.cos(a))[..., None] * c + (B * np.sin(a))[..., None] * n).reshape(-1, 3)
+    q = pts - down.base_xyz
+    h = q[:, 2]
+    H = down.tower_height
+    along = np.clip(h / H, 0.0, 1.0)
+    radius = down.tower_base_radius + (down.tower_top_radius - down.tower_base_radius) * along
+    depth = np.where((h >= 0) & (h <= H), radius - np.hypot(q[:, 0], q[:, 1]), -np.inf)
+    i = int(np.argmax(depth))
+    if depth[i] > 0:
+        raise ConfigError(
+            f"{where}: a blade pointing down would pass {depth[i]:.2f} m into the tower "
+            f"({h[i]:.1f} m above its base, tower radius {radius[i]:.2f} m there, hub "
+            f"{down.overhang:.2f} m ahead of the tower axis): check tower.base_radius_m / "
+            f"top_radius_m, overhang_m and the blade chord")
+
+
 def mission_from_dict(d: Any, where: str = "turbines.yaml", base_dir: str | Path = ".") -> Mission:
     """Validate a turbines.yaml mapping (merged over the packaged defaults) into a Mission."""
     base_dir = Path(base_dir)
@@ -436,6 +465,7 @@ def mission_from_dict(d: Any, where: str = "turbines.yaml", base_dir: str | Path
         if t.id in seen:
             raise ConfigError(f"{where}: turbines[{i}].id: duplicate turbine id {t.id!r}")
         seen.add(t.id)
+        _blades_clear_the_tower(t, f"{where}: turbines[{i}]")
         turbines.append(t)
         extras[t.id] = ex
     _apart(turbines, where)
