@@ -359,6 +359,25 @@ def test_plan_speed_and_hover_at_the_end_of_a_leg():
     assert ref.t[ref.end_index - 1] == pytest.approx(200, abs=2)  # + time to speed up, slow down
 
 
+def test_a_planned_route_is_flown_in_its_planned_time():
+    """The planner times each leg with its speed changes and corners; the set-point flies the
+    commanded speeds with the same ones, so they are not counted twice (a pass of short photo
+    legs took ~10 % longer than planned when the plan's speed was a leg's average)."""
+    from wtcli.plan.mission import ACCEL_M_S2, CORNER_M, _flown_leg_times
+
+    ang = np.radians(np.arange(0, 181, 6.0))  # a half ring of photo legs, then a straight return
+    pts = np.c_[20 * np.cos(ang), 20 * np.sin(ang), np.full(len(ang), 30.0)]
+    pts = np.vstack([pts, [[-20.0, -40.0, 30.0]]])
+    v = np.r_[np.full(len(ang) - 1, 2.5), 8.0]
+    dt = _flown_leg_times(pts, v, 3.0)
+    r = Route("UAV1", np.r_[0.0, np.cumsum(dt)], pts, np.r_[0.0, v], np.zeros(len(pts)),
+              np.zeros(len(pts)), np.zeros(len(pts), bool), np.array(["a"] * len(pts), object))
+    ref = make_reference(r.t, r.pos, r.yaw_deg, r.gimbal_pitch_deg, 0.02, 0.0, accel=ACCEL_M_S2,
+                         corner_m=CORNER_M, speed=r.speed, settle_s=0.0)
+    assert dt.sum() > (np.linalg.norm(np.diff(pts, axis=0), axis=1) / v).sum() + 2  # they cost time
+    assert ref.t[ref.end_index - 1] == pytest.approx(r.t[-1], abs=0.05)
+
+
 def test_manual_route_hovers_per_photo_and_keeps_the_geometry():
     from wtcli.fly.pilot import manual_route
 

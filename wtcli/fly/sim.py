@@ -132,11 +132,12 @@ def make_reference(t_wp: np.ndarray, pos_wp: np.ndarray, yaw_wp: np.ndarray, pit
                    speed: np.ndarray | None = None, yaw_rate: float | None = None,
                    pitch_rate: float | None = None, settle_s: float = SETTLE_S) -> Reference:
     """The set-point an autopilot's mission mode follows: the planned polyline exactly, each leg
-    at the planned speed (its length over its planned duration) with trapezoidal speed changes
-    at ``accel`` and corners taken at the junction-deviation speed; zero-length legs (hover,
-    turning on the spot) keep their planned duration. Time therefore runs a little behind the
-    plan at corners; photos are triggered when the set-point reaches their waypoint. The set-point
-    then hovers at the last waypoint for ``settle_s`` (room for a clock held back by a leash)."""
+    at the planned ``speed`` (else its length over its planned duration) with trapezoidal speed
+    changes at ``accel`` and corners taken at the junction-deviation speed; zero-length legs
+    (hover, turning on the spot) keep their planned duration, and a leg's planned time beyond
+    flying it so is a hover at its end. Time runs behind a plan that asks for instant speed
+    changes or camera turns; photos are triggered when the set-point reaches their waypoint. The
+    set-point then hovers at the last waypoint for ``settle_s`` (room for a leash's clock)."""
     tw = np.asarray(t_wp, float)
     P = np.asarray(pos_wp, float)
     seg = np.diff(P, axis=0)
@@ -156,7 +157,6 @@ def make_reference(t_wp: np.ndarray, pos_wp: np.ndarray, yaw_wp: np.ndarray, pit
         t_turn = np.maximum(t_turn, np.abs(np.diff(np.asarray(pitch_wp, float))) / (0.5 * pitch_rate))
     v_leg = np.where(moving & (t_turn > 0), np.minimum(v_leg, L / np.maximum(t_turn, 1e-9)), v_leg)
     dtp = np.where(~moving, np.maximum(dtp, t_turn), dtp)
-    dwell = np.where(moving, np.maximum(dtp - L / np.maximum(v_leg, 1e-9), 0.0), 0.0)
     a = float(accel)
     vc = corner_speeds(P, v_leg, a, corner_m)
     # Forward and backward passes: reachable with |acceleration| <= a along each leg.
@@ -174,6 +174,9 @@ def make_reference(t_wp: np.ndarray, pos_wp: np.ndarray, yaw_wp: np.ndarray, pit
     t_dec = np.where(moving, (vp - v1) / a, 0.0)
     t_cru = np.where(moving, d_cru / np.maximum(vp, 1e-9), 0.0)
     t_move = t_acc + t_cru + t_dec
+    # A plan's leg time holds its own speed changes (the planner times them as above): only what
+    # it allots beyond flying the leg (a battery swap, a wait) is spent hovering at its end.
+    dwell = np.where(moving, np.maximum(dtp - t_move, 0.0), 0.0)
     t_leg = np.where(moving, t_move + dwell, dtp)
     T = np.concatenate([[tw[0]], tw[0] + np.cumsum(t_leg)])
     n_end = int(math.ceil((T[-1] - T[0]) / dt)) + 1

@@ -448,7 +448,14 @@ def _timed_route(uav: str, wps: list[WP], swaps: list[int], sp: Speeds, swap_s: 
     photo = np.array([w.photo for w in wps], bool)
     wait = _photo_waits(dt + extra, photo, photo_interval_s)
     t = np.r_[0.0, np.cumsum(dt + extra + wait)]
-    speed = np.r_[0.0, np.divide(L, dt + wait, out=np.zeros(n - 1), where=dt + wait > 0)]
+    # The speed commanded on each leg (what the exports send and fly's reference flies, with its
+    # own speed changes as ``_flown_leg_times`` times them): the leg's speed under the climb
+    # rate; where the camera's interval holds a leg back, its length over its time.
+    dz = np.abs(np.diff(pos[:, 2]))
+    v_cmd = np.minimum(v, np.divide(sp.climb * L, dz, out=np.full(n - 1, np.inf), where=dz > 1e-9))
+    v_cmd = np.where(wait > 0, np.divide(L, dt + wait, out=np.zeros(n - 1), where=dt + wait > 0),
+                     v_cmd)
+    speed = np.r_[0.0, np.where(L > 1e-6, v_cmd, 0.0)]
     # The camera keeps the last forward given (none: the one before).
     have = np.array([w.fwd is not None for w in wps])
     have[0] = True
