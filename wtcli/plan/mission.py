@@ -236,18 +236,57 @@ def _unit(v: np.ndarray) -> np.ndarray:
 # at this acceleration, corners at the "junction deviation" speed for this deviation.
 ACCEL_M_S2 = 2.5
 CORNER_M = 0.05
+# The camera turns at these rates (fly's default vehicle): a leg that turns it is given at least
+# the time to turn at half of them, as fly's set-point gives it (the autopilot's yaw and gimbal).
+YAW_RATE_DEG_S = 90.0
+GIMBAL_RATE_DEG_S = 90.0
 
 
-def _flown_leg_times(P: np.ndarray, v: np.ndarray, climb: float) -> np.ndarray:
-    """Each leg's time as flown: at its speed ``v`` (and the climb rate), slowing to the corner
-    speed at each turn and to a stop at the ends and zero-length legs, speed changes at
-    ACCEL_M_S2 (trapezoids)."""
+def _aims(wps: list[WP], pitch_range: tuple[float, float] = (-90.0, 90.0)
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """(yaw, gimbal pitch) in degrees at each waypoint: the camera keeps the last aim given
+    (none yet: the first given), held at the gimbal's limits."""
+    n = len(wps)
+    first = next((w.fwd for w in wps if w.fwd is not None), np.array([0.0, 1.0, 0.0]))
+    have = np.array([w.fwd is not None for w in wps])
+    have[0] = True
+    fwds = np.array([w.fwd if w.fwd is not None else first for w in wps], float)
+    F = fwds[np.maximum.accumulate(np.where(have, np.arange(n), 0))]
+    F = F / np.linalg.norm(F, axis=1)[:, None]
+    yaw = np.degrees(np.arctan2(F[:, 0], F[:, 1])) % 360.0
+    pitch = np.clip(np.degrees(np.arcsin(np.clip(F[:, 2], -1.0, 1.0))), *pitch_range)
+    return yaw, pitch
+
+
+def _turn_times(yaw: np.ndarray, pitch: np.ndarray) -> np.ndarray:
+    """Each leg's least time for the camera's turn between its ends (s)."""
+    yu = np.degrees(np.unwrap(np.radians(yaw)))
+    return np.maximum(np.abs(np.diff(yu)) / (0.5 * YAW_RATE_DEG_S),
+                      np.abs(np.diff(pitch)) / (0.5 * GIMBAL_RATE_DEG_S))
+
+
+def _leg_speeds_flown(P: np.ndarray, v: np.ndarray, climb: float,
+                     turn_s: np.ndarray | None = None) -> np.ndarray:
+    """Each leg's speed ``v`` held to the climb rate and to the time its camera turn takes."""
+    D = np.diff(P, axis=0)
+    L = np.linalg.norm(D, axis=1)
+    dz = np.abs(D[:, 2])
+    ve = np.minimum(v, np.divide(climb * L, dz, out=np.full(len(L), np.inf), where=dz > 1e-9))
+    if turn_s is not None:
+        ve = np.minimum(ve, np.divide(L, turn_s, out=np.full(len(L), np.inf), where=turn_s > 0))
+    return np.where(L > 1e-6, ve, 0.0)
+
+
+def _flown_leg_times(P: np.ndarray, v: np.ndarray, climb: float,
+                     turn_s: np.ndarray | None = None) -> np.ndarray:
+    """Each leg's time as flown: at its speed ``v`` (and the climb rate, and slow enough for
+    the camera turn ``turn_s`` where given), slowing to the corner speed at each turn and to a
+    stop at the ends and zero-length legs, speed changes at ACCEL_M_S2 (trapezoids); a
+    zero-length leg takes its turn's time."""
     D = np.diff(P, axis=0)
     L = np.linalg.norm(D, axis=1)
     moving = L > 1e-6
-    dz = np.abs(D[:, 2])
-    ve = np.where(moving, np.minimum(v, np.divide(climb * L, dz, out=np.full(len(L), np.inf),
-                                                   where=dz > 1e-9)), 0.0)
+    ve = _leg_speeds_flown(P, v, climb, turn_s)
     m, a = len(P), ACCEL_M_S2
     vc = np.zeros(m)
     if m >= 3:
@@ -269,7 +308,8 @@ def _flown_leg_times(P: np.ndarray, v: np.ndarray, climb: float) -> np.ndarray:
     vp = np.sqrt(np.maximum((2 * a * L + v0 ** 2 + v1 ** 2) / 2, 0.0))  # peak of a triangle
     t_full = (vm - v0) / a + (vm - v1) / a + (L - d_acc) / np.maximum(vm, 1e-9)
     t_tri = (vp - v0) / a + (vp - v1) / a
-    return np.where(moving, np.where(full, t_full, t_tri), 0.0)
+    still = np.zeros(len(L)) if turn_s is None else turn_s
+    return np.where(moving, np.where(full, t_full, t_tri), still)
 
 
 def _flown(P: np.ndarray, v: float, climb: float) -> float:
@@ -281,7 +321,9 @@ def chunk_time(ch: Chunk, sp: Speeds) -> float:
     """Flight time of a chunk's legs at ``leg_speeds``, with the photo-interval waits."""
     if len(ch.wps) < 2:
         return 0.0
-    dt = _flown_leg_times(np.array([w.pos for w in ch.wps]), leg_speeds(ch.wps, sp), sp.climb)
+    turn = _turn_times(*_aims(ch.wps))
+    dt = _flown_leg_times(np.array([w.pos for w in ch.wps]), leg_speeds(ch.wps, sp), sp.climb,
+                          turn)
     waits = _photo_waits(dt, np.array([w.photo for w in ch.wps]), sp.interval)
     return float(dt.sum() + waits.sum())
 
@@ -440,8 +482,12 @@ def _timed_route(uav: str, wps: list[WP], swaps: list[int], sp: Speeds, swap_s: 
     The route's summary carries its ``time_budget`` per turbine id in ``turbines``."""
     n = len(wps)
     pos = np.array([w.pos for w in wps])
+    # Photo stations are chosen within the gimbal's range; an aim carried over between them
+    # (transits) or the overview's is held at the limit, as the gimbal would.
+    yaw, pitch = _aims(wps, pitch_range)
+    turn = _turn_times(yaw, pitch)
     v = leg_speeds(wps, sp)
-    dt = _flown_leg_times(pos, v, sp.climb)
+    dt = _flown_leg_times(pos, v, sp.climb, turn)
     L = np.linalg.norm(np.diff(pos, axis=0), axis=1)
     extra = np.zeros(n - 1)
     extra[[i - 1 for i in swaps]] = swap_s
@@ -450,22 +496,12 @@ def _timed_route(uav: str, wps: list[WP], swaps: list[int], sp: Speeds, swap_s: 
     t = np.r_[0.0, np.cumsum(dt + extra + wait)]
     # The speed commanded on each leg (what the exports send and fly's reference flies, with its
     # own speed changes as ``_flown_leg_times`` times them): the leg's speed under the climb
-    # rate; where the camera's interval holds a leg back, its length over its time.
-    dz = np.abs(np.diff(pos[:, 2]))
-    v_cmd = np.minimum(v, np.divide(sp.climb * L, dz, out=np.full(n - 1, np.inf), where=dz > 1e-9))
+    # rate and its camera turn; where the camera's interval holds a leg back, its length over
+    # its time.
+    v_cmd = _leg_speeds_flown(pos, v, sp.climb, turn)
     v_cmd = np.where(wait > 0, np.divide(L, dt + wait, out=np.zeros(n - 1), where=dt + wait > 0),
                      v_cmd)
     speed = np.r_[0.0, np.where(L > 1e-6, v_cmd, 0.0)]
-    # The camera keeps the last forward given (none: the one before).
-    have = np.array([w.fwd is not None for w in wps])
-    have[0] = True
-    fwds = np.array([w.fwd if w.fwd is not None else wps[0].fwd for w in wps])
-    F = fwds[np.maximum.accumulate(np.where(have, np.arange(n), 0))]
-    F = F / np.linalg.norm(F, axis=1)[:, None]
-    yaw = np.degrees(np.arctan2(F[:, 0], F[:, 1])) % 360.0
-    # Photo stations are chosen within the gimbal's range; an aim carried over between them
-    # (transits) or the overview's is held at the limit, as the gimbal would.
-    pitch = np.clip(np.degrees(np.arcsin(np.clip(F[:, 2], -1.0, 1.0))), *pitch_range)
     # Each sortie: from leaving the launch point to landing there (the swap's ground time not
     # included): what the usable battery (battery_minutes - reserve) must cover.
     starts, ends = [0] + list(swaps), [i - 1 for i in swaps] + [n - 1]
