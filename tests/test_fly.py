@@ -378,6 +378,26 @@ def test_a_planned_route_is_flown_in_its_planned_time():
     assert ref.t[ref.end_index - 1] == pytest.approx(r.t[-1], abs=0.05)
 
 
+def test_the_planners_route_is_its_set_points_time():
+    """A whole planned inspection (passes, rings, camera turns, transits): fly's set-point, with
+    the default vehicle's yaw and gimbal rates, takes the time the plan's battery decisions
+    rest on (they differed by 10 % when the plan's speed was a leg's average speed and camera
+    turns were not timed)."""
+    from wtcli.plan.config import Mission, Settings
+    from wtcli.plan.mission import plan_mission
+
+    plan = plan_mission(Mission((Turbine("T1", (0.0, 0.0, 0.0), 60.0, 60.0, 180.0, (80.0, 200.0, 320.0)),),
+                                CAM, settings=Settings(min_side_coverage=0.0)))
+    scn = default_scenario()
+    c, v = scn.control, scn.vehicle
+    r = plan.routes[0]
+    ref = make_reference(r.t, r.pos, r.yaw_deg, r.gimbal_pitch_deg, 1.0 / c.control_hz,
+                         c.reference_smoothing_s, c.reference_accel_ms2, c.corner_deviation_m,
+                         speed=r.speed, yaw_rate=v.yaw_rate_deg_s, pitch_rate=v.gimbal_rate_deg_s,
+                         settle_s=0.0)
+    assert ref.t[ref.end_index - 1] == pytest.approx(r.t[-1], rel=0.005)
+
+
 def test_manual_route_hovers_per_photo_and_keeps_the_geometry():
     from wtcli.fly.pilot import manual_route
 
