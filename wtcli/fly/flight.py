@@ -655,7 +655,7 @@ class FlightReport:
 # (benchmarks/fly_margins.py). RTK that may degrade near the tower counts as float. At 12 m/s
 # every mode reached a blade (gusts beyond the vehicle's rated wind), so no margin is documented
 # above SAFE_HUB_WIND_MS and `fly` warns there.
-DOCUMENTED_MARGIN_M = {"rtk_fixed": 1.5, "rtk_float": 2.0, "gnss": 4.0}
+DOCUMENTED_MARGIN_M = {"rtk_fixed": 2.0, "rtk_float": 2.0, "gnss": 4.0}
 SAFE_HUB_WIND_MS = 10.0
 
 
