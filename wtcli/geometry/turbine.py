@@ -441,6 +441,23 @@ class Turbine:
             inside &= cross >= 0  # counter-clockwise polygon
         return np.where(inside, 0.0, d)
 
+    def tower_radius_at(self, h: np.ndarray) -> np.ndarray:
+        """The tower's radius at height ``h`` above its base (clipped to the frustum's ends)."""
+        f = np.clip(np.asarray(h, float) / self.tower_height, 0.0, 1.0)
+        return self.tower_base_radius + (self.tower_top_radius - self.tower_base_radius) * f
+
+    def blade_outline(self, k: int, step: float = 0.1, around: int = 72) -> np.ndarray:
+        """(M, 3) points on blade k's whole modelled surface, a section every ``step`` m from
+        root to tip, ``around`` points each; unlike ``surface_samples``, the parts buried in the
+        hub, nacelle or tower are kept (what a check of the model's own consistency needs)."""
+        d, c, n = self.blade_frame(k)
+        r0 = self.blade_root_offset
+        f = np.linspace(0.0, 1.0, max(2, int((self.tip_radius - r0) / step) + 1))[:, None]
+        A, B = self.blade_semi_axes(f)
+        a = np.linspace(0.0, 2 * np.pi, around, endpoint=False)[None, :]
+        return (self.hub_center + (r0 + f * (self.tip_radius - r0))[..., None] * d
+                + (A * np.cos(a))[..., None] * c + (B * np.sin(a))[..., None] * n).reshape(-1, 3)
+
     # ---- surface samples -------------------------------------------------------------------
     def surface_samples(self, spacing: float = 0.5, parts: str = "all") -> SurfaceSamples:
         """Points on the surface with outward normals, area weights and labels.

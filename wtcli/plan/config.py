@@ -344,20 +344,11 @@ def _blades_clear_the_tower(t: Turbine, where: str) -> None:
     a plan around it would rest on a surface that is not there). Checked at every azimuth's
     worst, straight down, so angles read later from a photo cannot change the answer."""
     down = replace(t, azimuths_deg=(270.0,))
-    d, c, n = down.blade_frame(0)
-    r0 = down.blade_root_offset
-    f = np.linspace(0.0, 1.0, max(2, int((down.tip_radius - r0) / 0.1) + 1))[:, None]
-    A, B = down.blade_semi_axes(f)
-    a = np.linspace(0.0, 2 * np.pi, 72, endpoint=False)[None, :]
-    # The whole modelled outline (surface_samples leaves out what is buried in another part).
-    pts = (down.hub_center + (r0 + f * (down.tip_radius - r0))[..., None] * d
-           + (A * np.cos(a))[..., None] * c + (B * np.sin(a))[..., None] * n).reshape(-1, 3)
-    q = pts - down.base_xyz
+    q = down.blade_outline(0) - down.base_xyz
     h = q[:, 2]
-    H = down.tower_height
-    along = np.clip(h / H, 0.0, 1.0)
-    radius = down.tower_base_radius + (down.tower_top_radius - down.tower_base_radius) * along
-    depth = np.where((h >= 0) & (h <= H), radius - np.hypot(q[:, 0], q[:, 1]), -np.inf)
+    radius = down.tower_radius_at(h)
+    depth = np.where((h >= 0) & (h <= down.tower_height), radius - np.hypot(q[:, 0], q[:, 1]),
+                     -np.inf)
     i = int(np.argmax(depth))
     if depth[i] > 0:
         raise ConfigError(
