@@ -211,3 +211,51 @@ def test_where_the_root_runs_into_the_hub_the_figure_converges():
     s = figs[0].samples
     root = (s.blade == 0) & (s.span * (t.tip_radius - t.blade_root_offset) < 1.0)
     assert (s.level[root] == 3).any()
+
+
+def test_structure_samples_are_its_outer_surface_only():
+    """A structure sample inside or on another part is not sampled, as a buried blade root is
+    not: the nacelle's front face within the hub sphere, its underside on the tower's top, the
+    hub's back within the nacelle. What is left lies outside every other part."""
+    t = Turbine.with_rotor_azimuth(10.0, id="T1", base=(0, 0, 0), hub_height=100,
+                                   rotor_diameter=160, yaw_deg=30.0)
+    smp = t.surface_samples(0.5, "structure")
+    names = t.part_names()
+    d = t.clearance_by_part(smp.points)
+    for part in ("tower", "nacelle", "hub"):
+        sel = smp.part == names.index(part)
+        others = np.delete(d[sel], names.index(part), axis=1)
+        assert sel.any() and (others.min(axis=1) > 0).all(), part
+    a, side, half = t._nacelle_frame()
+    q = smp.points - t.nacelle_center
+    nac = smp.part == names.index("nacelle")
+    front = nac & (q @ a > half[0] - 1e-6)
+    # The hub sphere reaches past the front face's middle: only its corners remain.
+    assert 0 < (smp.area[front]).sum() < 0.25 * (2 * half[1]) * (2 * half[2])
+    assert not (front & (np.hypot(q @ side, q[:, 2]) < 0.5)).any()
+    under = nac & (q[:, 2] < -half[2] + 1e-6)
+    axis_d = np.hypot(*(smp.points[under][:, :2] - t.base_xyz[:2]).T)
+    assert axis_d.min() >= t.tower_top_radius - 1e-6  # none on the tower's top
+    hub = smp.part == names.index("hub")
+    assert ((smp.points[hub] - t.hub_center) @ a).min() > -t.hub_radius  # its back is inside
+
+
+def test_the_nacelle_underside_round_the_tower_top_gets_extra_views():
+    """The underside's rows cannot fly over the tower's top at a safe distance; oblique views
+    from beside the nacelle see most of what they leave. Coverage of the nacelle is measured on
+    its outer surface, every photo of the turbine counted."""
+    from wtcli.geometry.coverage import measure_coverage
+
+    t = Turbine.with_rotor_azimuth(33.0, id="T1", base=(0, 0, 0), hub_height=98,
+                                   rotor_diameter=162, yaw_deg=200.0)
+    m = Mission((t,), CAM, settings=Settings(min_side_coverage=0.0))
+    plan = plan_mission(m)
+    pos, rot = _photos_of(t, plan.routes)
+    smp = t.surface_samples(0.5, "structure")
+    cov = measure_coverage(smp, CAM, pos, rot, plan.summary["coverage_gsd_mm"], 60.0)
+    nac = smp.part == t.part_names().index("nacelle")
+    assert cov.fraction(nac) >= 0.9
+    under = nac & (smp.normals[:, 2] < -0.9)
+    assert cov.fraction(under) >= 0.75
+    notes = " ".join(plan.summary.get("notes", []))
+    assert "T1/nacelle:" in notes and "extra view(s)" in notes

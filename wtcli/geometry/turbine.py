@@ -470,9 +470,9 @@ class Turbine:
             for k in range(self.n_blades):
                 chunks.append(self._blade_samples(k, spacing))
         if parts in ("all", "structure"):
-            chunks.append(self._tower_samples(spacing))
-            chunks.append(self._nacelle_samples(spacing))
-            chunks.append(self._hub_samples(spacing))
+            chunks.append(self._outer(self._tower_samples(spacing)))
+            chunks.append(self._outer(self._nacelle_samples(spacing)))
+            chunks.append(self._outer(self._hub_samples(spacing)))
         cat = {key: np.concatenate([ch[key] for ch in chunks]) for key in chunks[0]}
         return SurfaceSamples(**cat, turbine=self)
 
@@ -614,6 +614,18 @@ class Turbine:
         nrm = np.stack([rr * np.cos(ang), rr * np.sin(ang), zc], axis=1)
         return self._structure(self.hub_center + r * nrm, nrm, np.full(n, 4 * math.pi * r * r / n),
                                self.n_blades + 2)
+
+    def _outer(self, smp: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """A structure part's samples less those inside or on another part: the nacelle's front
+        face within the hub sphere, its underside on the tower's top, the hub's back within the
+        nacelle and its surface within the blade roots. As with a blade root, that is not the
+        turbine's outer surface, and no camera sees it."""
+        if not len(smp["points"]):
+            return smp
+        d = self.clearance_by_part(smp["points"], cap=1e-6)
+        d[:, int(smp["part"][0])] = np.inf
+        keep = d.min(axis=1) > 0.0
+        return {key: v[keep] for key, v in smp.items()}
 
     @staticmethod
     def _structure(pts: np.ndarray, nrm: np.ndarray, area: np.ndarray, part: int) -> dict:

@@ -31,7 +31,8 @@ from wtcli.geometry import Camera, Turbine
 from wtcli.geometry.coverage import Coverage, turbine_coverage
 from wtcli.plan.config import Mission
 from wtcli.plan.paths import (GAP_ROUND_FINE_SAMPLES, WP, Chunk, PassParams, _Blocked,
-                              add_gap_views, blade_chunk, connect, gap_plan, nacelle_chunk,
+                              add_gap_views, blade_chunk, connect, gap_plan, gap_views,
+                              insert_views, nacelle_chunk,
                               tower_chunk)
 from wtcli.plan.clearance import Site
 from wtcli.plan.zone import initial_point, zone
@@ -391,11 +392,14 @@ def _yaw_pitch(fwd: np.ndarray) -> tuple[float, float]:
 
 def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Mission, site: Site,
                 pp: PassParams, links: dict | None = None, times: list[float] | None = None,
-                missing: list | None = None) -> Route | None:
+                missing: list | None = None, cap: float | None = None,
+                sorties: list | None = None) -> Route | None:
     """``links``: {(p bytes, q bytes): via points or None} for legs already ``connect``-ed (in
     the workers); any other leg is connected here. ``times``: ``chunk_time`` of each chunk, if
     known. With ``missing``, a dry run: the legs not in ``links`` are appended to it (as (p, q))
-    instead of connected, and no route is returned.
+    instead of connected, and no route is returned. ``cap``: a battery change once a sortie
+    would pass this many seconds (at most the usable battery; a chunk longer than it flies
+    alone); ``sorties`` gets the number of sorties appended.
 
     The battery decisions time each transit and return leg along its via points where the leg
     is in ``links`` (straight where not yet connected): a detour round a turbine is flown, so
@@ -406,6 +410,7 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
     v_fast, climb = sp.cruise, sp.climb
     above = launch + Z * s.takeoff_altitude_m
     usable = fl.usable_battery_s
+    limit = usable if cap is None else min(cap, usable)
     first_fwd = _unit(np.r_[(chunks[0].start - launch)[:2], 0.0] + 1e-9)
     wps: list[WP] = [WP(launch.copy(), first_fwd, False, "launch", False)]
     swaps: list[int] = []  # indices of the waypoints that end a battery swap on the ground
@@ -447,7 +452,7 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
         t_ch = times[i] if times is not None else chunk_time(ch, sp)
         t_to = leg_s(wps[-1].pos, ch.start)
         t_back = leg_s(ch.end, above) + s.takeoff_altitude_m / climb
-        if sortie + t_to + t_ch + t_back > usable:
+        if sortie + t_to + t_ch + t_back > limit:
             fresh = _flown(np.vstack([launch, above]), v_fast, climb) + leg_s(above, ch.start)
             if fresh + t_ch + t_back > usable:
                 raise PlanError(
@@ -468,10 +473,47 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
         wps.extend(ch.wps[1:])
         sortie += t_to + t_ch
     go_home()
+    if sorties is not None:
+        sorties.append(len(swaps) + 1)
     if missing is not None:
         return None
     return _timed_route(uav, wps, swaps, sp, fl.battery_swap_s, fl.gimbal_pitch_range,
                         sp.interval, sorted({c.turbine for c in chunks}))
+
+
+SORTIE_CAP_STEPS = 12  # bisections of the balanced sorties' cap (usable battery / 4096)
+
+
+def _balanced_cap(job: tuple, links: dict) -> float | None:
+    """The least battery cap that flies ``job``'s route in as many sorties as the whole usable
+    battery does (bisected on dry runs): the same battery changes, each sortie as short as they
+    allow, so the reserve is left for wind rather than the first sortie filled to the brim and
+    the last one short. None for a route of one sortie."""
+    mission = job[3]
+    usable = mission.fleet.usable_battery_s
+
+    def count(cap: float | None) -> int:
+        n: list = []
+        build_route(*job, missing=[], cap=cap, sorties=n)
+        return n[0]
+
+    def count_safe(cap: float) -> int | None:
+        try:
+            return count(cap)
+        except PlanError:
+            return None
+
+    want = count(None)
+    if want <= 1:
+        return None
+    lo, hi = 0.0, usable
+    for _ in range(SORTIE_CAP_STEPS):
+        mid = 0.5 * (lo + hi)
+        if count_safe(mid) == want:
+            hi = mid
+        else:
+            lo = mid
+    return hi
 
 
 def _timed_route(uav: str, wps: list[WP], swaps: list[int], sp: Speeds, swap_s: float,
@@ -719,7 +761,39 @@ def _chunks(job: tuple) -> list[Chunk]:
             if not any(more.values()):
                 break
             add_gap_views(chunks, more, site, pp)
+        _nacelle_gap_views(t, chunks, mission, site, pp, gsd_eval, reach)
     return chunks
+
+
+NACELLE_GAP_VIEWS = 8  # extra photos of the nacelle at most: its rows leave the underside
+# round the tower's top, which no row reaches at a safe distance, but oblique views from beside
+# the nacelle do
+
+
+def _nacelle_gap_views(t: Turbine, chunks: list[Chunk], mission: Mission, site, pp: PassParams,
+                       gsd_eval: float, reach: float) -> None:
+    """Extra views (``gap_views``, as for the blades) of the nacelle surface that no photo of the
+    turbine's chunks covers, flown within the nacelle's own chunk."""
+    nac = next((c for c in chunks if c.name == "nacelle" and c.wps), None)
+    if nac is None:
+        return
+    s = mission.settings
+    pos = np.array([w.pos for c in chunks for w in c.wps if w.photo]).reshape(-1, 3)
+    rot = np.array([_rotation(*(round(v, 6) for v in _yaw_pitch(w.fwd)))
+                    for c in chunks for w in c.wps if w.photo]).reshape(-1, 3, 3)
+    cov = turbine_coverage(t, mission.camera, pos, rot, gsd_eval, s.coverage_spacing_m,
+                           s.max_incidence_deg, "structure")
+    smp = cov.samples
+    miss = np.nonzero((smp.part == t.part_names().index("nacelle")) & ~cov.covered)[0]
+    if not len(miss):
+        return
+    views = gap_views(t, smp.points[miss], smp.normals[miss], smp.area[miss], site, pp,
+                      s.max_incidence_deg, reach, NACELLE_GAP_VIEWS)
+    if not views:
+        return
+    lost = insert_views(nac, [(p, f, f"{t.id}/nacelle") for p, f, _ in views], site, pp)
+    nac.notes.append(f"{t.id}/nacelle: {len(views) - lost} extra view(s) of surface its rows miss"
+                     + (f"; {lost} no safe path reaches: dropped" if lost else ""))
 
 
 def _photos_of(t: Turbine, routes: list[Route]) -> tuple[np.ndarray, np.ndarray]:
@@ -856,16 +930,21 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
     # a dry run of each route names them, then the routes are built from them (in parallel).
     # A connected leg's detour can move a battery swap, which asks for other legs: repeated
     # until the dry runs ask for nothing new (the battery decisions then rest on flown legs).
+    # Each UAV's sorties balanced: the least cap that keeps its number of battery changes,
+    # found again as legs get connected (their detours are flown, so they count).
+    caps: dict[str, float | None] = {}
     for rounds in range(MAX_LEG_ROUNDS):
         missing: list = []
         for job in jobs:
-            build_route(*job, missing=missing)
+            caps[job[0]] = _balanced_cap(job, links)
+            build_route(*job, missing=missing, cap=caps[job[0]])
         legs = {(p.tobytes(), q.tobytes()): (site_plan, p, q, pp.leg_required, s.min_altitude_m)
                 for p, q in missing}
         tick = stage_ticker(progress, "legs", len(legs)) if rounds == 0 else (lambda: None)
         if not legs:
             break
         links.update(_map(_link, list(legs.values()), workers, tick))
+    jobs = [(*job, None, caps.get(job[0])) for job in jobs]  # (..., missing, cap)
     routes = _map(_route, jobs, workers, stage_ticker(progress, "routes", len(jobs)))
     over = [(r.uav, r.summary["longest_sortie_s"]) for r in routes
             if r.summary["longest_sortie_s"] > fl.usable_battery_s + 1e-6]
