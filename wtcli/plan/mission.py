@@ -761,11 +761,13 @@ def _chunks(job: tuple) -> list[Chunk]:
             if not any(more.values()):
                 break
             add_gap_views(chunks, more, site, pp)
-        _nacelle_gap_views(t, chunks, mission, site, pp, gsd_eval, reach)
+        for _ in range(NACELLE_GAP_ROUNDS):
+            _nacelle_gap_views(t, chunks, mission, site, pp, gsd_eval, reach)
     return chunks
 
 
-NACELLE_GAP_VIEWS = 8  # extra photos of the nacelle at most: its rows leave the underside
+NACELLE_GAP_ROUNDS = 2
+NACELLE_GAP_VIEWS = 5  # extra photos of the nacelle at most: its rows leave the underside
 # round the tower's top, which no row reaches at a safe distance, but oblique views from beside
 # the nacelle do
 
