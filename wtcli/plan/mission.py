@@ -484,7 +484,7 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
 SORTIE_CAP_STEPS = 12  # bisections of the balanced sorties' cap (usable battery / 4096)
 
 
-def _balanced_cap(job: tuple, links: dict) -> float | None:
+def _balanced_cap(job: tuple) -> float | None:
     """The least battery cap that flies ``job``'s route in as many sorties as the whole usable
     battery does (bisected on dry runs): the same battery changes, each sortie as short as they
     allow, so the reserve is left for wind rather than the first sortie filled to the brim and
@@ -492,16 +492,10 @@ def _balanced_cap(job: tuple, links: dict) -> float | None:
     mission = job[3]
     usable = mission.fleet.usable_battery_s
 
-    def count(cap: float | None) -> int:
+    def count(cap: float | None) -> int:  # a chunk too long for any battery raises either way
         n: list = []
         build_route(*job, missing=[], cap=cap, sorties=n)
         return n[0]
-
-    def count_safe(cap: float) -> int | None:
-        try:
-            return count(cap)
-        except PlanError:
-            return None
 
     want = count(None)
     if want <= 1:
@@ -509,7 +503,7 @@ def _balanced_cap(job: tuple, links: dict) -> float | None:
     lo, hi = 0.0, usable
     for _ in range(SORTIE_CAP_STEPS):
         mid = 0.5 * (lo + hi)
-        if count_safe(mid) == want:
+        if count(mid) == want:
             hi = mid
         else:
             lo = mid
@@ -938,7 +932,7 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
     for rounds in range(MAX_LEG_ROUNDS):
         missing: list = []
         for job in jobs:
-            caps[job[0]] = _balanced_cap(job, links)
+            caps[job[0]] = _balanced_cap(job)
             build_route(*job, missing=missing, cap=caps[job[0]])
         legs = {(p.tobytes(), q.tobytes()): (site_plan, p, q, pp.leg_required, s.min_altitude_m)
                 for p, q in missing}
