@@ -668,12 +668,13 @@ def predict_coverage(t: Turbine, routes: list[Route], camera: Camera, gsd_mm: fl
                             max_incidence)
 
 
-def _blade_coverage_from_chunks(t: Turbine, chunks: list[Chunk], camera: Camera, gsd_mm: float,
-                                spacing: float, max_incidence: float) -> Coverage:
+def _coverage_from_chunks(t: Turbine, chunks: list[Chunk], camera: Camera, gsd_mm: float,
+                          spacing: float, max_incidence: float, parts: str = "blades") -> Coverage:
+    """``turbine_coverage`` of the chunks' photo stations, posed as the routes will record them."""
     pos = np.array([w.pos for c in chunks for w in c.wps if w.photo]).reshape(-1, 3)
     rot = np.array([_rotation(*(round(v, 6) for v in _yaw_pitch(w.fwd)))
                     for c in chunks for w in c.wps if w.photo]).reshape(-1, 3, 3)
-    return turbine_coverage(t, camera, pos, rot, gsd_mm, spacing, max_incidence, "blades")
+    return turbine_coverage(t, camera, pos, rot, gsd_mm, spacing, max_incidence, parts)
 
 
 # ---- per-turbine work (run in worker processes for large sites) ----------------------------------------
@@ -704,8 +705,8 @@ def _chunks(job: tuple) -> list[Chunk]:
     s = mission.settings
     chunks = turbine_chunks(t, site, pp, mission, rings=pattern == "adaptive")
     if pattern == "adaptive":
-        cov = _blade_coverage_from_chunks(t, chunks, mission.camera, gsd_eval,
-                                          s.coverage_spacing_m, s.max_incidence_deg)
+        cov = _coverage_from_chunks(t, chunks, mission.camera, gsd_eval,
+                                    s.coverage_spacing_m, s.max_incidence_deg)
         # Extra views for what the passes miss (mostly the trailing edge at the root and facing
         # the tower), within 2 % of the coverage GSD (the measure allows 5 %: the rest is left
         # for the flight's position error); a side still short is flown split.
@@ -721,8 +722,8 @@ def _chunks(job: tuple) -> list[Chunk]:
             rings = {int(c.name[5:]) - 1: c for c in chunks
                      if c.name.startswith("blade") and c.pattern.startswith("ring")}
             chunks = turbine_chunks(t, site, pp, mission, split, previous=chunks)
-            cov = _blade_coverage_from_chunks(t, chunks, mission.camera, gsd_eval,
-                                              s.coverage_spacing_m, s.max_incidence_deg)
+            cov = _coverage_from_chunks(t, chunks, mission.camera, gsd_eval,
+                                        s.coverage_spacing_m, s.max_incidence_deg)
             more, covered2 = gap_plan(t, cov.samples, cov.covered, site, pp, s.max_incidence_deg,
                                       reach, set(split))
             # A ring blade short on a side is flown side by side instead (those sides split)
@@ -743,8 +744,8 @@ def _chunks(job: tuple) -> list[Chunk]:
         sure = not split and all(min(sides.values()) >= s.min_side_coverage
                                  for sides in predicted.values())
         for _ in range(0 if sure else GAP_ROUNDS):
-            cov = _blade_coverage_from_chunks(t, chunks, mission.camera, gsd_eval,
-                                              s.coverage_spacing_m, s.max_incidence_deg)
+            cov = _coverage_from_chunks(t, chunks, mission.camera, gsd_eval,
+                                        s.coverage_spacing_m, s.max_incidence_deg)
             mins = {int(b[5:]) - 1: min(sides.values()) for b, sides in cov.by_blade_side().items()}
             short = {k for k, v in mins.items() if v < s.min_side_coverage}
             if not short or (last is not None and all(mins[k] < last[k] + 0.005 for k in short)):
@@ -774,11 +775,8 @@ def _nacelle_gap_views(t: Turbine, chunks: list[Chunk], mission: Mission, site, 
     if nac is None:
         return
     s = mission.settings
-    pos = np.array([w.pos for c in chunks for w in c.wps if w.photo]).reshape(-1, 3)
-    rot = np.array([_rotation(*(round(v, 6) for v in _yaw_pitch(w.fwd)))
-                    for c in chunks for w in c.wps if w.photo]).reshape(-1, 3, 3)
-    cov = turbine_coverage(t, mission.camera, pos, rot, gsd_eval, s.coverage_spacing_m,
-                           s.max_incidence_deg, "structure")
+    cov = _coverage_from_chunks(t, chunks, mission.camera, gsd_eval, s.coverage_spacing_m,
+                                s.max_incidence_deg, "structure")
     smp = cov.samples
     miss = np.nonzero((smp.part == t.part_names().index("nacelle")) & ~cov.covered)[0]
     if not len(miss):
