@@ -38,10 +38,7 @@ NACELLE_DEFICIT = 0.5
 
 def tower_radius_at(t: Turbine, z_rel: np.ndarray) -> np.ndarray:
     """Tower radius at heights above its base (linear taper), NaN above its top."""
-    h = t.tower_height
-    f = np.clip(z_rel / h, 0.0, 1.0)
-    r = t.tower_base_radius + (t.tower_top_radius - t.tower_base_radius) * f
-    return np.where((z_rel >= 0) & (z_rel <= h), r, np.nan)
+    return np.where((z_rel >= 0) & (z_rel <= t.tower_height), t.tower_radius_at(z_rel), np.nan)
 
 
 def wake_series(turbines: list[Turbine], pos: np.ndarray, t: np.ndarray, unit: np.ndarray,

@@ -570,7 +570,7 @@ class Turbine:
         H, rb, rt = self.tower_height, self.tower_base_radius, self.tower_top_radius
         nh = max(2, int(math.ceil(H / spacing)))
         h = (np.arange(nh) + 0.5) * H / nh
-        r = rb + (rt - rb) * h / H
+        r = self.tower_radius_at(h)
         m = max(16, int(math.ceil(2 * math.pi * rb / spacing)))
         ang = (np.arange(m) + 0.5) * 2 * math.pi / m
         Hh, Aa = np.meshgrid(np.arange(nh), ang, indexing="ij")
@@ -665,10 +665,10 @@ class Turbine:
             add(verts, _tube_faces(len(s), around, cap_end=len(verts) - 1), k)
 
         # Tower: frustum split into height bands.
-        H, rb, rt = self.tower_height, self.tower_base_radius, self.tower_top_radius
+        H = self.tower_height
         bands = 16
         h = np.linspace(0, H, bands + 1)
-        r = rb + (rt - rb) * h / H
+        r = self.tower_radius_at(h)
         ang = np.arange(around * 2) * math.pi / around
         rings = self.base_xyz + np.stack([r[:, None] * np.cos(ang), r[:, None] * np.sin(ang),
                                           np.broadcast_to(h[:, None], (bands + 1, len(ang)))], -1)

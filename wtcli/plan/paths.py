@@ -830,7 +830,7 @@ TOWER_FOOT_DEG = 30.0  # each column's lowest view looks down this far, to the t
 def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
                 start_near: np.ndarray | None = None) -> Chunk:
     chunk = Chunk(turbine.id, "tower")
-    rb, rt, H = turbine.tower_base_radius, turbine.tower_top_radius, turbine.tower_height
+    rb, H = turbine.tower_base_radius, turbine.tower_height
     fw, fh = pp.camera.footprint_m(pp.standoff)
     if columns <= 0:
         columns = max(5, int(math.ceil(2 * math.pi * rb / (0.5 * fw))))
@@ -843,7 +843,7 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
     if start_near is not None:  # begin with the column nearest the previous point
         v = np.asarray(start_near) - turbine.base_xyz
         yaw0 = math.atan2(v[1], v[0])
-    r = rb + (rt - rb) * zs / H
+    r = turbine.tower_radius_at(zs)
 
     def column(ang: float) -> tuple[np.ndarray, np.ndarray]:
         """A column's stations top -> bottom; the lowest looks down TOWER_FOOT_DEG from the
@@ -852,7 +852,7 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
         pos = turbine.base_xyz + (r + pp.standoff)[:, None] * u + zs[:, None] * Z
         fwd = np.tile(-u, (nz, 1))
         zf = pp.min_altitude + 0.1
-        foot = turbine.base_xyz + (rb + (rt - rb) * zf / H + pp.min_standoff) * u + zf * Z
+        foot = turbine.base_xyz + (turbine.tower_radius_at(zf) + pp.min_standoff) * u + zf * Z
         look = math.radians(TOWER_FOOT_DEG)
         return (np.vstack([pos, foot]),
                 np.vstack([fwd, -math.cos(look) * u - math.sin(look) * Z]))
