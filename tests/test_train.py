@@ -403,7 +403,9 @@ def test_real_dataset_reads_a_photo_folder_and_holds_out_sequences(tmp_path):
     s = ds.load(1)
     assert s.image.shape == (240, 320, 3) and list(s.instances.labels).count("blade") == 3
     x, t = ds[1]
-    assert x.shape == (3, 240, 320) and sorted(t["labels"].tolist()) == [1, 1, 1, 2, 3]
+    # The nacelle the split tells apart is not taught from a photo: an ignore box instead.
+    assert x.shape == (3, 240, 320) and sorted(t["labels"].tolist()) == [1, 1, 1, 2]
+    assert t["ignore_boxes"].shape == (1, 4)
     # A sequence column names the flights; holding one out leaves the others.
     rows = list(csv.reader((root / "manifest.csv").open()))
     rows[0].append("sequence")
@@ -489,3 +491,52 @@ def test_view_mix_reaches_the_renders(tmp_path):
     assert not torch.equal(plain[0][0], wide[0][0])
     with pytest.raises(ConfigError, match="--view-mix"):
         train(_tiny(tmp_path, view_mix="front=x"))
+
+
+def test_a_nacelle_the_mask_does_not_tell_apart_is_taught_as_nothing():
+    """A photo's class 2 holds the nacelle; where it is not told apart, the tower's top must
+    become neither a tower target nor background (the renders call it nacelle)."""
+    from wtcli.segment.model import _in_ignored
+    from wtcli.segment.real import split_semantic
+
+    import cv2
+
+    sem = np.zeros((320, 400), np.uint8)
+    sem[150:, 192:208] = 2  # a shaft 16 px wide below the hub at (200, 150)
+    sem[145:175, 186:214] = 2  # a nacelle only 1.75 shafts wide: not told apart
+    for a in (90, 210, 330):
+        cv2.fillPoly(sem, [_blade((200, 150), a)], 1)
+    s = split_semantic(sem)
+    assert "nacelle" not in list(s.instances.labels) and s.unknown is not None
+    labels, masks, ignore = D.training_instances(s)
+    tower = masks[list(labels).index("tower")]
+    assert tower.any() and not (tower & ignore).any()
+    assert ignore[170:180, 194:206].all() and not ignore[190:].any()
+    box = D.ignore_boxes(ignore)
+    assert len(box) == 1 and box[0, 1] <= 150 and box[0, 3] >= 175
+    # Anchors and proposals over the nacelle are not background; those elsewhere still are.
+    model = build_model()
+    anchors = torch.tensor([[186.0, 150, 214, 175], [20, 20, 60, 60], [195, 250, 205, 300],
+                            [192, 200, 208, 320]])
+    gt = {"boxes": torch.tensor([[192.0, 200, 208, 320]]), "labels": torch.tensor([2]),
+          "masks": torch.zeros((1, 320, 400), dtype=torch.uint8),
+          "ignore_boxes": torch.from_numpy(box)}
+    assert _in_ignored(anchors, gt["ignore_boxes"]).tolist() == [True, False, False, False]
+    rpn_labels, _ = model.rpn.assign_targets_to_anchors([anchors], [gt])
+    assert rpn_labels[0].tolist() == [-1.0, 0.0, 0.0, 1.0]
+    model.train()
+    _, _, roi_labels, _ = model.roi_heads.select_training_samples([anchors.clone()], [gt])
+    assert sorted(roi_labels[0].tolist()) == [0, 0, 2, 2]  # the tower box and its ground truth
+    without = dict(gt, ignore_boxes=torch.zeros((0, 4)))
+    _, _, roi_labels, _ = model.roi_heads.select_training_samples([anchors.clone()], [without])
+    assert sorted(roi_labels[0].tolist()) == [0, 0, 0, 2, 2]
+    # The ignore region follows a flip and a crop like the masks do.
+    img = np.zeros((320, 400, 3), np.uint8)
+    sample = D.Sample(img, Instances(labels, masks), ignore)
+    for seed in range(6):
+        a = D.augment(sample, np.random.default_rng(seed))
+        assert a.ignore is not None and a.ignore.shape == (320, 400)
+        t = a.instances.masks[list(a.instances.labels).index("tower")]
+        assert (t & a.ignore).sum() <= 0.005 * t.sum()  # resampled alike: apart
+    _, target = D.to_target(sample)
+    assert target["ignore_boxes"].shape == (1, 4)

@@ -30,6 +30,9 @@ MIN_INSTANCE_PIXELS = 24
 class Sample:
     image: np.ndarray  # BGR uint8 [H, W, 3]
     instances: Instances
+    # [H, W] bool where the labels cannot say the class (a real photo's nacelle, whose masks
+    # have no such class: ``training_instances``): proposals and anchors there teach nothing.
+    ignore: np.ndarray | None = None
 
 
 # ---- sources -------------------------------------------------------------------------------
@@ -184,18 +187,41 @@ class RealDataset(torch.utils.data.Dataset):
 
         img, sem = R.read_pair(self.photos[k])
         if k not in self._cache:  # the split is the slow part (~0.3 s a photo): once per process
-            inst = R.split_semantic(sem, MIN_INSTANCE_PIXELS).instances
-            self._cache[k] = (inst.labels, np.packbits(inst.masks, axis=-1), inst.image_size)
-        labels, packed, (h, w) = self._cache[k]
+            labels, masks, ignore = training_instances(R.split_semantic(sem, MIN_INSTANCE_PIXELS))
+            self._cache[k] = (labels, np.packbits(masks, axis=-1), sem.shape,
+                              None if ignore is None else np.packbits(ignore, axis=-1))
+        labels, packed, (h, w), unk = self._cache[k]
+        ignore = None if unk is None else np.unpackbits(unk, axis=-1, count=w).astype(bool)
         if not len(labels):
-            return Sample(img, Instances.empty(h, w))
-        return Sample(img, Instances(labels, np.unpackbits(packed, axis=-1, count=w).astype(bool)))
+            return Sample(img, Instances.empty(h, w), ignore)
+        return Sample(img, Instances(labels, np.unpackbits(packed, axis=-1, count=w).astype(bool)), ignore)
 
     def __getitem__(self, i: int):
         s = self.load(i)
         if self.augment:
             s = augment(s, np.random.default_rng((self.aug_seed, 2, self.epoch, int(i))))
         return to_target(s)
+
+
+def training_instances(split) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """A photo's split as training targets: (labels, masks, ignore). The photos' masks have no
+    nacelle class, so the nacelle is left to the renders: a nacelle the split tells apart is a
+    guess at its extent (rows of the tower's top), one it does not is somewhere in the tower's
+    top (``split.unknown``). Both become ignore boxes, and the second is taken out of the tower."""
+    inst = split.instances
+    h, w = inst.image_size
+    if not len(inst):
+        return inst.labels, inst.masks.reshape(0, h, w), split.unknown
+    ignore = np.zeros((h, w), bool) if split.unknown is None else split.unknown.copy()
+    for m in inst.masks[inst.labels == "nacelle"]:
+        ys, xs = np.nonzero(m)
+        ignore[ys.min(): ys.max() + 1, xs.min(): xs.max() + 1] = True
+    masks = inst.masks.copy()
+    tower = inst.labels == "tower"
+    masks[tower] &= ~ignore
+    keep = (inst.labels != "nacelle") & (~tower | (masks.reshape(len(masks), -1).sum(axis=1)
+                                                  >= MIN_INSTANCE_PIXELS))
+    return inst.labels[keep], masks[keep], ignore if ignore.any() else None
 
 
 class MixedDataset(torch.utils.data.Dataset):
@@ -233,10 +259,12 @@ def augment(s: Sample, rng: np.random.Generator) -> Sample:
     """Photometric and geometric jitter on top of the renderer's own randomisation:
     horizontal flip, crop-and-rescale, brightness/contrast/saturation, blur, noise, JPEG."""
     img, inst = s.image, s.instances
+    ignore = getattr(s, "ignore", None)  # renders (synth.SynthSample) label everything
     masks, labels = inst.masks, inst.labels
     h, w = img.shape[:2]
     if rng.random() < 0.5:
         img, masks = img[:, ::-1], masks[:, :, ::-1]
+        ignore = None if ignore is None else ignore[:, ::-1]
     if rng.random() < 0.3:  # crop a part and scale it back to full size (closer views)
         f = rng.uniform(0.6, 0.95)
         ch, cw = int(h * f), int(w * f)
@@ -247,6 +275,9 @@ def augment(s: Sample, rng: np.random.Generator) -> Sample:
         masks = np.stack([cv2.resize(np.ascontiguousarray(m[y0:y0 + ch, x0:x0 + cw]).astype(np.float32),
                                      (w, h), interpolation=cv2.INTER_LINEAR) >= 0.5
                           for m in masks]) if len(masks) else np.zeros((0, h, w), bool)
+        if ignore is not None:
+            ignore = cv2.resize(np.ascontiguousarray(ignore[y0:y0 + ch, x0:x0 + cw]).astype(np.float32),
+                                (w, h), interpolation=cv2.INTER_LINEAR) >= 0.5
     img = np.ascontiguousarray(img).astype(np.float32)
     if rng.random() < 0.8:
         img = img * rng.uniform(0.7, 1.3) + rng.uniform(-25, 25)
@@ -268,9 +299,11 @@ def augment(s: Sample, rng: np.random.Generator) -> Sample:
     keep = masks.reshape(len(masks), -1).sum(axis=1) >= MIN_INSTANCE_PIXELS if len(masks) else []
     if len(masks) and not np.all(keep):
         masks, labels = masks[keep], labels[keep]
+    if ignore is not None:
+        ignore = np.ascontiguousarray(ignore) if ignore.any() else None
     if not len(masks):
-        return Sample(img, Instances.empty(h, w))
-    return Sample(img, Instances(labels, np.ascontiguousarray(masks)))
+        return Sample(img, Instances.empty(h, w), ignore)
+    return Sample(img, Instances(labels, np.ascontiguousarray(masks)), ignore)
 
 
 # ---- tensors -------------------------------------------------------------------------------
@@ -295,7 +328,17 @@ def to_target(s: Sample) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         boxes, labels = np.zeros((0, 4), np.float32), np.zeros(0, np.int64)
         masks = torch.zeros((0, h, w), dtype=torch.uint8)
     return image_tensor(s.image), {"boxes": torch.from_numpy(boxes), "labels": torch.from_numpy(labels),
-                                   "masks": masks}
+                                   "masks": masks,
+                                   "ignore_boxes": torch.from_numpy(ignore_boxes(getattr(s, "ignore", None)))}
+
+
+def ignore_boxes(ignore: np.ndarray | None) -> np.ndarray:
+    """(K, 4) float32 xyxy: a box round each connected part of the ignore mask."""
+    if ignore is None or not ignore.any():
+        return np.zeros((0, 4), np.float32)
+    n, _, stats, _ = cv2.connectedComponentsWithStats(ignore.astype(np.uint8), connectivity=8)
+    x, y, bw, bh = (stats[1:, i].astype(np.float32) for i in range(4))
+    return np.stack([x, y, x + bw, y + bh], axis=1)
 
 
 def _box(m: np.ndarray) -> list[float]:

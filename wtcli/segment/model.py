@@ -68,8 +68,9 @@ from torchvision.models.detection import MaskRCNN  # noqa: E402
 from torchvision.models.detection.anchor_utils import AnchorGenerator  # noqa: E402
 from torchvision.models.detection.faster_rcnn import FastRCNNPredictor, TwoMLPHead  # noqa: E402
 from torchvision.models.detection.mask_rcnn import MaskRCNNHeads, MaskRCNNPredictor  # noqa: E402
+from torchvision.models.detection.roi_heads import RoIHeads  # noqa: E402
 from torchvision.models.detection.rpn import RegionProposalNetwork, RPNHead  # noqa: E402
-from torchvision.models.detection.transform import GeneralizedRCNNTransform  # noqa: E402
+from torchvision.models.detection.transform import GeneralizedRCNNTransform, resize_boxes  # noqa: E402
 from torchvision.models.resnet import BasicBlock  # noqa: E402
 from torchvision.ops import MultiScaleRoIAlign  # noqa: E402
 from torchvision.ops.feature_pyramid_network import FeaturePyramidNetwork, LastLevelMaxPool  # noqa: E402
@@ -147,12 +148,54 @@ class _Backbone(nn.Module):
         return feats
 
 
+IGNORE_OVERLAP = 0.5  # a box this much (of its own area) inside a target's ignore box teaches nothing
+
+
+def _in_ignored(boxes: torch.Tensor, ignore: torch.Tensor | None) -> torch.Tensor:
+    """(N,) bool: boxes with at least IGNORE_OVERLAP of their area inside one ignore box."""
+    if ignore is None or not len(ignore) or not len(boxes):
+        return torch.zeros(len(boxes), dtype=torch.bool, device=boxes.device)
+    ignore = ignore.to(boxes)
+    lt = torch.maximum(boxes[:, None, :2], ignore[None, :, :2])
+    rb = torch.minimum(boxes[:, None, 2:], ignore[None, :, 2:])
+    inter = (rb - lt).clamp(min=0).prod(dim=2)
+    area = (boxes[:, 2:] - boxes[:, :2]).clamp(min=1e-6).prod(dim=1)
+    return (inter / area[:, None] >= IGNORE_OVERLAP).any(dim=1)
+
+
 class _CoarseRPN(RegionProposalNetwork):
     """The RPN of torchvision, on the FPN's levels without the fine one (which only the mask
-    head pools from: proposals and anchors stay as trained)."""
+    head pools from: proposals and anchors stay as trained). In training, anchors that would be
+    background inside a target's ``ignore_boxes`` (``data.Sample.ignore``) are left out."""
 
     def forward(self, images, features, targets=None):
         return super().forward(images, {k: v for k, v in features.items() if k != FINE}, targets)
+
+    def assign_targets_to_anchors(self, anchors, targets):
+        labels, matched = super().assign_targets_to_anchors(anchors, targets)
+        for a, lab, t in zip(anchors, labels, targets):
+            lab[(lab == 0) & _in_ignored(a, t.get("ignore_boxes"))] = -1.0
+        return labels, matched
+
+
+class _IgnoringRoIHeads(RoIHeads):
+    """torchvision's RoI heads, except that in training a proposal that would be background
+    inside a target's ``ignore_boxes`` is never sampled (label -1, as between the thresholds)."""
+
+    def select_training_samples(self, proposals, targets):
+        self._ignore = [t.get("ignore_boxes") for t in targets] if targets is not None else None
+        try:
+            return super().select_training_samples(proposals, targets)
+        finally:
+            self._ignore = None
+
+    def assign_targets_to_proposals(self, proposals, gt_boxes, gt_labels):
+        matched, labels = super().assign_targets_to_proposals(proposals, gt_boxes, gt_labels)
+        ignore = getattr(self, "_ignore", None)
+        if ignore is not None:
+            for p, lab, ig in zip(proposals, labels, ignore):
+                lab[(lab == 0) & _in_ignored(p, ig)] = -1
+        return matched, labels
 
 
 class _FineMaskPool(MultiScaleRoIAlign):
@@ -178,7 +221,10 @@ class _Transform(GeneralizedRCNNTransform):
 
     def resize(self, image, target=None):
         masks = target.pop("masks") if target is not None and "masks" in target else None
+        h, w = image.shape[-2:]
         image, target = super().resize(image, target)
+        if target is not None and "ignore_boxes" in target:
+            target["ignore_boxes"] = resize_boxes(target["ignore_boxes"], (h, w), image.shape[-2:])
         if masks is not None:
             size = image.shape[-2:]
             if masks.shape[-2:] != size:
@@ -215,6 +261,7 @@ def build_model(detections_per_img: int = 20) -> MaskRCNN:
         mask_predictor=MaskRCNNPredictor(128, 128, NUM_CLASSES),
     )
     model.rpn.__class__ = _CoarseRPN  # same RPN, same parameters; only the levels it sees
+    model.roi_heads.__class__ = _IgnoringRoIHeads  # same heads; only what training samples
     t = model.transform
     model.transform = _Transform(t.min_size, t.max_size, t.image_mean, t.image_std)
     return model

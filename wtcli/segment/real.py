@@ -17,8 +17,12 @@ makes them:
   other turbines) are a blade each;
 * **nacelle**, where it can be told apart: on a tower at least four times as tall as its
   shaft is wide, the rows near its top (from within its top 15 %, down to at most 40 %) at least
-  twice the shaft's width (nacelle and hub, as the renders label them); a class-2 part no taller than 1.5 times its width (a nacelle seen close,
-  no shaft below it) is a nacelle whole. Otherwise the class-2 part stays tower.
+  twice the shaft's width (nacelle and hub, as the renders label them); a class-2 part no
+  taller than 1.5 times its width (a nacelle seen close, no shaft below it) is a nacelle whole.
+  Otherwise the class-2 part stays tower, and where a hub was found its rows down to two shaft
+  widths under the hub (or to its lowest wide row near the top) are boxed as ``unknown``: the
+  nacelle is in there somewhere, so training takes them out of the tower and teaches neither
+  tower nor background there.
 
 Flight sequences: frames of one flight are near-duplicates, so a photo's figures count only
 from a model that trained on none of its sequence. A ``sequence`` column in the manifest says
@@ -172,6 +176,9 @@ class Split:
     instances: Instances
     hubs: tuple[tuple[float, float], ...]  # (x, y) of every hub found
     blade_hub: tuple[int | None, ...]  # per blade instance (in order): its hub's index, or None
+    # Where the mask cannot say the class: the top of a tower whose nacelle is not told apart
+    # (``nacelle_unknown``). Training leaves it out of the tower and teaches nothing there.
+    unknown: np.ndarray | None = None  # (H, W) bool
 
 
 def _components(mask: np.ndarray, min_pixels: int) -> list[np.ndarray]:
@@ -387,6 +394,38 @@ def _nacelle_part(tower: np.ndarray) -> np.ndarray | None:
     return None
 
 
+NACELLE_BELOW_HUB = 2.0  # shaft widths: how far below the hub a nacelle not told apart may reach
+
+
+def nacelle_unknown(tower: np.ndarray, hub: tuple[float, float]) -> np.ndarray | None:
+    """The box round a tower's pixels where its nacelle may be, when ``_nacelle_part`` cannot
+    tell it apart: every row above ``NACELLE_BELOW_HUB`` shaft widths under the hub, or above the lowest row in
+    the tower's top 40 % at least 1.5 shaft widths wide if lower (the renders label nacelle and
+    hub apart from the tower; a photo's class 2 does not). None without a shaft to measure."""
+    rows = tower.sum(axis=1)
+    ys = np.nonzero(rows)[0]
+    if not len(ys):
+        return None
+    lower = rows[ys[0] + (ys[-1] - ys[0] + 1) // 2: ys[-1] + 1]
+    lower = lower[lower > 0]
+    shaft = float(np.median(lower)) if len(lower) else 0.0
+    if shaft <= 0:
+        return None
+    end = hub[1] + NACELLE_BELOW_HUB * shaft
+    top = rows[ys[0]: ys[0] + int(0.4 * (ys[-1] - ys[0] + 1)) + 1]
+    wide = np.nonzero(top >= 1.5 * shaft)[0]  # a nacelle lower than the hub hint (oblique views)
+    if len(wide):
+        end = max(end, ys[0] + wide[-1] + 0.5 * shaft)
+    region = tower.copy()
+    region[int(math.ceil(end)):] = False
+    if not region.any():
+        return None
+    ry, rx = np.nonzero(region)
+    box = np.zeros_like(tower)  # the box round them: blades crossing it do not cut it apart
+    box[ry.min(): ry.max() + 1, rx.min(): rx.max() + 1] = True
+    return box
+
+
 def split_semantic(sem: np.ndarray, min_pixels: int = 24) -> Split:
     """A semantic mask (0 background, 1 blade, 2 tower incl. nacelle and hub) -> instances:
     a blade each, a tower per turbine, its nacelle where it can be told apart (module docstring)."""
@@ -398,6 +437,7 @@ def split_semantic(sem: np.ndarray, min_pixels: int = 24) -> Split:
     blade_parts = _components(blade, min_pixels)
     taken = np.zeros(len(blade_parts), bool)
     out_labels, out_masks, blade_hub, hubs = [], [], [], []
+    unknown = np.zeros((h, w), bool)
     for t in towers:
         free = [k for k in range(len(blade_parts)) if not taken[k]]
         if not free:
@@ -431,6 +471,9 @@ def split_semantic(sem: np.ndarray, min_pixels: int = 24) -> Split:
         else:
             out_labels.append("tower")
             out_masks.append(t)
+            top = nacelle_unknown(t, hub) if hub is not None else None
+            if top is not None:
+                unknown |= top
     for k in np.nonzero(~taken)[0]:
         out_labels.append("blade")
         out_masks.append(blade_parts[k])
@@ -438,11 +481,12 @@ def split_semantic(sem: np.ndarray, min_pixels: int = 24) -> Split:
     # Blades first (as the renders list them), then towers and nacelles.
     order = ([i for i, l in enumerate(out_labels) if l == "blade"]
              + [i for i, l in enumerate(out_labels) if l != "blade"])
+    unk = unknown if unknown.any() else None
     if not order:
-        return Split(Instances.empty(h, w), tuple(hubs), ())
+        return Split(Instances.empty(h, w), tuple(hubs), (), unk)
     inst = Instances(np.array([out_labels[i] for i in order], dtype=object),
                      np.stack([out_masks[i] for i in order]))
-    return Split(inst, tuple(hubs), tuple(blade_hub))
+    return Split(inst, tuple(hubs), tuple(blade_hub), unk)
 
 
 def blade_angles(split: Split) -> list[tuple[int | None, float]]:
