@@ -118,8 +118,9 @@ SECTIONS: tuple[Section, ...] = (
         "python benchmarks/segment_real.py --runs runs/cv --train ARGS",
         "The recipe of docs/train.md (\"Fine-tuning on the real photos\"): the shipped model "
         "fine-tuned for 15 minutes of a 2-core CPU on renders and 40 % real photos, once per flight "
-        "sequence with that sequence held out, each photo measured with the model of its own fold. "
-        "Not shipped: on development renders it reads the nacelle less well (docs/train.md).",
+        "sequence with that sequence held out, each photo measured with the model of its own fold "
+        "(the photos teach blades and tower, the nacelle is left to the renders). Not shipped: on "
+        "development renders it reads the nacelle less well (docs/train.md).",
         (F("blade / tower IoU, pooled", ("pooled.blade_iou", "pooled.tower_iou", "pooled.photos"),
            "{:.3f} / {:.3f} ({} photos)", "≥ 0.80 / 0.80"),
          F("blade / tower IoU on close-ups", ("per_view.close-up.blade_iou", "per_view.close-up.tower_iou",
