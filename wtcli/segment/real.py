@@ -367,6 +367,13 @@ def _axes_meet(pieces: list[np.ndarray]) -> tuple[float, float] | None:
     return float(x[0]), float(x[1])
 
 
+def _shaft_width(rows: np.ndarray, ys: np.ndarray) -> float:
+    """A tower's shaft width: the median width of the rows in the lower half of its height."""
+    lower = rows[ys[0] + (ys[-1] - ys[0] + 1) // 2: ys[-1] + 1]
+    lower = lower[lower > 0]
+    return float(np.median(lower)) if len(lower) else 0.0
+
+
 def _nacelle_part(tower: np.ndarray) -> np.ndarray | None:
     """The nacelle (with hub) at a tower's top where it can be told apart, else None; the whole
     part when it is a nacelle seen close (no taller than 1.5 times its width)."""
@@ -375,9 +382,7 @@ def _nacelle_part(tower: np.ndarray) -> np.ndarray | None:
     height = ys[-1] - ys[0] + 1
     xs = np.nonzero(tower.any(axis=0))[0]
     width = xs[-1] - xs[0] + 1
-    lower = rows[ys[0] + height // 2: ys[-1] + 1]
-    lower = lower[lower > 0]
-    shaft = float(np.median(lower)) if len(lower) else 0.0
+    shaft = _shaft_width(rows, ys)
     if shaft > 0 and height >= 4 * shaft:
         wide = rows[ys[0]: ys[-1] + 1] >= 2 * shaft
         top = int(np.argmax(wide))  # first wide row from the top (a nacelle's top is rounded)
@@ -399,16 +404,15 @@ NACELLE_BELOW_HUB = 2.0  # shaft widths: how far below the hub a nacelle not tol
 
 def nacelle_unknown(tower: np.ndarray, hub: tuple[float, float]) -> np.ndarray | None:
     """The box round a tower's pixels where its nacelle may be, when ``_nacelle_part`` cannot
-    tell it apart: every row above ``NACELLE_BELOW_HUB`` shaft widths under the hub, or above the lowest row in
-    the tower's top 40 % at least 1.5 shaft widths wide if lower (the renders label nacelle and
-    hub apart from the tower; a photo's class 2 does not). None without a shaft to measure."""
+    tell it apart: every row above ``NACELLE_BELOW_HUB`` shaft widths under the hub, or above
+    the lowest row in the tower's top 40 % at least 1.5 shaft widths wide if lower (the renders
+    label nacelle and hub apart from the tower; a photo's class 2 does not). None without a
+    shaft to measure."""
     rows = tower.sum(axis=1)
     ys = np.nonzero(rows)[0]
     if not len(ys):
         return None
-    lower = rows[ys[0] + (ys[-1] - ys[0] + 1) // 2: ys[-1] + 1]
-    lower = lower[lower > 0]
-    shaft = float(np.median(lower)) if len(lower) else 0.0
+    shaft = _shaft_width(rows, ys)
     if shaft <= 0:
         return None
     end = hub[1] + NACELLE_BELOW_HUB * shaft
