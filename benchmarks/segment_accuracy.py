@@ -30,8 +30,9 @@
 3. Real photos, when ``--real`` (default ../shared/real-photos beside the repo) exists: blade and tower IoU
    against its semantic masks (0 background, 1 blade, 2 tower incl. nacelle/hub; our tower
    prediction = tower ∪ nacelle), and the blade count on the photos the manifest tags as front
-   views (with and without completion). These photos are for evaluation only: never train on
-   them or copy them into the repo.
+   views (with and without completion); skipped when the model trained on real photos (its
+   meta names them), whose figures come from ``segment_real.py``, cross-validated by flight
+   sequence. Never copy the photos into the repo.
 
 4. Edge refinement (``wtcli.segment.refine``; ``--no-refine`` skips it): every figure
    of the second look again with the instances' edges refined, as ``segment`` gives them
@@ -437,6 +438,12 @@ def real_photos(model, root: Path, log, refiner=None) -> dict:
             "front_blade_counts_without_completion": counts0}
 
 
+def _trained_on_real(weights: Path) -> str | None:
+    """The real-photo folder a weights file trained on (its meta's ``real``), else None."""
+    meta = torch.load(weights, map_location="cpu", weights_only=True).get("meta", {})
+    return meta.get("real") or None
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=300)
@@ -485,8 +492,15 @@ def main(argv: list[str] | None = None) -> dict:
                                 load_model(weights, "cpu", "fp32") if model.precision != "fp32" else None,
                                 refiner)
     real = Path(a.real)
+    learned = _trained_on_real(weights)
     if a.dev:
         result["real"] = None
+    elif learned:
+        # Figures on photos the model learned would say nothing; segment_real.py measures the
+        # recipe cross-validated by flight sequence instead.
+        result["real"] = None
+        log(f"  {shown(weights)} trained on the real photos ({learned}): real-photo figures "
+            "skipped (benchmarks/segment_real.py cross-validates them)")
     elif real.is_dir():
         result["real"] = real_photos(model, real, log, refiner)
     else:

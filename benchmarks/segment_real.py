@@ -27,7 +27,10 @@ views whose truth splits into exactly three blades at one hub: the share where p
 exactly three blades, and the blade-angle error against pitch run on the split truth (each true
 blade matched to the measured one of nearest phi; theta mod 180, phi mod 360).
 
-Writes ``benchmarks/results/segment_real.json`` (``_results.save``) or ``--out``.
+Writes ``benchmarks/results/segment_real.json`` (``_results.save``) for the shipped model on
+every photo, ``segment_real_finetune.json`` with ``--runs``; ``--model``, ``--only``,
+``--limit``, ``--max-side`` and ``--no-refine`` need ``--out``, so that another model or a
+subset never overwrites those figures.
 """
 
 from __future__ import annotations
@@ -175,12 +178,22 @@ def main(argv: list[str] | None = None) -> dict:
                     help="read photos at most this long (default: as they are)")
     ap.add_argument("--no-refine", action="store_true", help="without the edge refiner")
     ap.add_argument("--threads", type=int, default=None, help="torch CPU threads")
-    ap.add_argument("--out", default=None, help="results file (default benchmarks/results/segment_real.json)")
+    ap.add_argument("--out", default=None,
+                    help="results file (default benchmarks/results/segment_real.json, with "
+                         "--runs segment_real_finetune.json; needed with --model or a subset)")
     args = ap.parse_args(argv)
     if args.train is not None and args.runs is None:
         ap.error("--train needs --runs (where the fold runs go)")
     if args.model and args.runs:
         ap.error("--model and --runs: one or the other")
+    if args.out is None and (args.model or args.only is not None or args.limit
+                             or args.max_side or args.no_refine):
+        # The default results files hold the figures on every photo, as segment runs it: the
+        # shipped model's, and with --runs the cross-validated fine-tune's; another model or a
+        # subset must not overwrite them.
+        ap.error("--out FILE is needed with --model, --only, --limit, --max-side or --no-refine "
+                 "(the default results file holds the figures on every photo)")
+    default_name = "segment_real_finetune" if args.runs else "segment_real"
     import torch
 
     from wtcli.segment.infer import load_model
@@ -246,9 +259,10 @@ def main(argv: list[str] | None = None) -> dict:
     except ImportError:  # the results writer absent: plain JSON
         from wtcli.jsonio import write_json
 
-        write_json(args.out or ROOT / "benchmarks" / "results" / "segment_real.json", res)
+        write_json(args.out or ROOT / "benchmarks" / "results" / f"{default_name}.json", res)
     else:
-        save("segment_real", res, argv=argv, out=args.out)
+        save("segment_real", res, argv=argv,
+             out=args.out or ROOT / "benchmarks" / "results" / f"{default_name}.json")
     return res
 
 

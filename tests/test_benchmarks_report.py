@@ -121,3 +121,25 @@ def test_the_readmes_figures_are_the_benchmark_pages():
     assert len(figures) >= 5, quoted
     missing = [f for f in figures if f not in page]
     assert not missing, f"README.md quotes {missing}, not on docs/benchmarks.md"
+
+
+def test_a_subset_or_another_model_never_overwrites_the_real_photo_figures(capsys):
+    seg_real = _load("segment_real")
+    before = (ROOT / "benchmarks" / "results" / "segment_real.json").read_bytes()
+    for argv in (["--limit", "2"], ["--only", "other"], ["--model", "some.pt"], ["--no-refine"]):
+        with pytest.raises(SystemExit) as e:
+            seg_real.main(argv)
+        assert e.value.code == 2, argv
+        assert "--out FILE is needed" in capsys.readouterr().err
+    assert (ROOT / "benchmarks" / "results" / "segment_real.json").read_bytes() == before
+
+
+def test_segment_accuracy_knows_a_model_that_learned_the_real_photos(tmp_path):
+    import torch
+
+    seg_acc = _load("segment_accuracy")
+    torch.save({"arch": "x", "state_dict": {}, "meta": {"real": "../shared/real-photos",
+                                                        "real_holdout": []}}, tmp_path / "r.pt")
+    torch.save({"arch": "x", "state_dict": {}, "meta": {"data": "synthetic"}}, tmp_path / "s.pt")
+    assert seg_acc._trained_on_real(tmp_path / "r.pt") == "../shared/real-photos"
+    assert seg_acc._trained_on_real(tmp_path / "s.pt") is None
