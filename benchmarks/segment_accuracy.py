@@ -438,10 +438,9 @@ def real_photos(model, root: Path, log, refiner=None) -> dict:
             "front_blade_counts_without_completion": counts0}
 
 
-def _trained_on_real(weights: Path) -> str | None:
-    """The real-photo folder a weights file trained on (its meta's ``real``), else None."""
-    meta = torch.load(weights, map_location="cpu", weights_only=True).get("meta", {})
-    return meta.get("real") or None
+def _trained_on_real(model) -> str | None:
+    """The real-photo folder a loaded model's weights trained on (their meta's ``real``)."""
+    return (getattr(model, "meta", None) or {}).get("real") or None
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -492,7 +491,7 @@ def main(argv: list[str] | None = None) -> dict:
                                 load_model(weights, "cpu", "fp32") if model.precision != "fp32" else None,
                                 refiner)
     real = Path(a.real)
-    learned = _trained_on_real(weights)
+    learned = _trained_on_real(model)
     if a.dev:
         result["real"] = None
     elif learned:

@@ -135,11 +135,12 @@ def test_a_subset_or_another_model_never_overwrites_the_real_photo_figures(capsy
 
 
 def test_segment_accuracy_knows_a_model_that_learned_the_real_photos(tmp_path):
-    import torch
+    from wtcli.segment.infer import load_model
+    from wtcli.segment.model import build_model, save_weights
 
     seg_acc = _load("segment_accuracy")
-    torch.save({"arch": "x", "state_dict": {}, "meta": {"real": "../shared/real-photos",
-                                                        "real_holdout": []}}, tmp_path / "r.pt")
-    torch.save({"arch": "x", "state_dict": {}, "meta": {"data": "synthetic"}}, tmp_path / "s.pt")
-    assert seg_acc._trained_on_real(tmp_path / "r.pt") == "../shared/real-photos"
-    assert seg_acc._trained_on_real(tmp_path / "s.pt") is None
+    net = build_model()
+    save_weights(net, tmp_path / "r.pt", {"real": "../shared/real-photos", "real_holdout": []})
+    save_weights(net, tmp_path / "s.pt", {"data": "synthetic"})
+    assert seg_acc._trained_on_real(load_model(tmp_path / "r.pt", "cpu", "fp32")) == "../shared/real-photos"
+    assert seg_acc._trained_on_real(load_model(tmp_path / "s.pt", "cpu", "fp32")) is None

@@ -58,6 +58,7 @@ def load_model(weights: str | Path | None = None, device: str | torch.device | N
             # Where mask cells sit in their box depends on how the weights were trained
             # (see paste_mask); files from before that was recorded are offset 0.
             model.mask_offset_px = float(meta.get("mask_offset_px", 0.0))
+            model.meta = meta  # how the file was trained (e.g. which real photos it learned)
             set_infer_size(model)
             model.eval().to(dev)
             backbone_in_bf16(model, prec == "bf16")
