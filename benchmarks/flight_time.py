@@ -2,6 +2,7 @@
 
     python benchmarks/flight_time.py [--cases 10] [--seed 46] [--scenarios paper-s1,paper-s2]
                                      [--inspection-speed 2.0] [--spacing 0.5] [--out results.json]
+                                     [--compare-camera 5456,3632,16,23.2]
 
 For the paper's scenarios (the shipped ``paper-s*`` missions, planned as ``fly`` plans them) and
 for random single turbines (hub 40-120 m, rotor 80-170 m, the hub at least R + 15 m so the rotor
@@ -18,6 +19,9 @@ with ``min_side_coverage: 0`` so no plan is refused for coverage), it reports:
 - the manual pilot's time over the same geometry (``wtcli.fly.pilot.manual_route`` with the
   scenario defaults: half the planned speeds, at most 3 m/s, 4 s hover per photo), and our
   reduction beside the paper's stated -78 %.
+
+The random turbines are planned again with ``--compare-camera`` (default: a 16 mm lens on a
+23.2 mm sensor, 1.5 mm/px at 5.6 m), to show what the lens costs in minutes and coverage.
 
 Done when (issue #46): mean <= 10 min per random turbine, every blade side >= 98 %, tower and
 nacelle >= 95 %, no violation. ``--inspection-speed`` overrides ``fleet.inspection_speed_m_s``
@@ -49,12 +53,17 @@ from wtcli.plan.config import Mission, Settings, default_dict, load_mission  # n
 from wtcli.plan.mission import BUDGET_KEYS, _photos_of, plan_mission  # noqa: E402
 from wtcli.plan_file import Plan  # noqa: E402
 
+COMPARE_CAMERA = "5456,3632,16,23.2"  # formats.md's example camera: 1.5 mm/px at 5.6 m
 PAPER_REDUCTION = -0.78  # the paper's stated time change, automated against manual
 TARGET_MIN, SIDE_MIN, STRUCTURE_MIN = 10.0, 0.98, 0.95
 
 
-def _camera():
+def _camera(spec: str | None = None):
+    """The default camera, or ``spec`` = "WIDTH_PX,HEIGHT_PX,FOCAL_MM,SENSOR_WIDTH_MM"."""
     from wtcli.geometry import Camera
+    if spec:
+        w, h, f, s = (float(x) for x in spec.split(","))
+        return Camera(int(w), int(h), f, s)
     c = default_dict()["camera"]
     return Camera(c["width_px"], c["height_px"], c["focal_mm"], c["sensor_width_mm"])
 
@@ -119,9 +128,10 @@ def scenarios(names: list[str], speed: float | None, spacing: float) -> dict:
     return out
 
 
-def random_turbines(cases: int, seed: int, speed: float | None, spacing: float) -> dict:
+def random_turbines(cases: int, seed: int, speed: float | None, spacing: float,
+                    camera: str | None = None) -> dict:
     rng = np.random.default_rng(seed)
-    cam = _camera()
+    cam = _camera(camera)
     rows, refused = [], []
     for i in range(cases):
         rotor = float(rng.uniform(80, 170))
@@ -158,7 +168,13 @@ def random_turbines(cases: int, seed: int, speed: float | None, spacing: float) 
            "tower_min": float(tower.min()) if rows else None,
            "nacelle_min": float(nac.min()) if rows else None,
            "violations": int(viol),
-           "capture": rows[0]["capture"] if rows else None}
+           "capture": rows[0]["capture"] if rows else None,
+           # each case's figures, to see which turbine sets the worst
+           "per_case": [{"hub_m": r["turbines"][0]["hub_m"], "rotor_m": r["turbines"][0]["rotor_m"],
+                         "minutes": r["minutes_per_turbine"],
+                         "min_blade_side": r["turbines"][0]["min_blade_side"],
+                         "tower": r["turbines"][0]["tower"], "nacelle": r["turbines"][0]["nacelle"]}
+                        for r in rows]}
     agg["done"] = bool(rows and not refused and agg["minutes_mean"] <= TARGET_MIN
                        and sides.min() >= SIDE_MIN and min(tower.min(), nac.min()) >= STRUCTURE_MIN
                        and viol == 0)
@@ -174,13 +190,21 @@ def main() -> None:
     ap.add_argument("--inspection-speed", type=float, default=None,
                     help="override fleet.inspection_speed_m_s (m/s)")
     ap.add_argument("--spacing", type=float, default=0.5, help="coverage sample spacing (m)")
+    ap.add_argument("--compare-camera", default=COMPARE_CAMERA,
+                    help="WIDTH_PX,HEIGHT_PX,FOCAL_MM,SENSOR_WIDTH_MM: the random turbines again "
+                    "with this camera ('' for none; default the 16 mm APS-C of formats.md)")
     ap.add_argument("--out", type=Path, default=None)
     a = ap.parse_args()
     names = [n for n in a.scenarios.split(",") if n]
     res = {"scenarios": scenarios(names, a.inspection_speed, a.spacing),
            "random": random_turbines(a.cases, a.seed, a.inspection_speed, a.spacing)}
+    if a.compare_camera:
+        print(f"random turbines with the camera {a.compare_camera}:", flush=True)
+        res["random_compare"] = random_turbines(a.cases, a.seed, a.inspection_speed, a.spacing,
+                                                a.compare_camera)
+        res["random_compare"]["camera"] = a.compare_camera
     agg = res["random"]["aggregate"]
-    print(json.dumps({k: v for k, v in agg.items() if k != "refused"}, indent=1))
+    print(json.dumps({k: v for k, v in agg.items() if k not in ("refused", "per_case")}, indent=1))
     sc = res["scenarios"]
     if sc:
         mean = float(np.mean([m["reduction_vs_manual"] for m in sc.values()]))
@@ -190,6 +214,14 @@ def main() -> None:
           f"{STRUCTURE_MIN:.0%}, 0 violations): {agg['done']}")
     summary = {"scenarios": {k: {kk: vv for kk, vv in v.items()} for k, v in sc.items()},
                "random": agg}
+    if "random_compare" in res:
+        cmp_ = res["random_compare"]["aggregate"]
+        summary["random_compare"] = {"camera": a.compare_camera, **cmp_}
+        print(f"the same turbines with {a.compare_camera}: {cmp_['minutes_mean']:.1f} min mean "
+              f"(default camera {agg['minutes_mean']:.1f}, ratio "
+              f"{agg['minutes_mean'] / cmp_['minutes_mean']:.2f}); lowest side "
+              f"{100 * cmp_['min_blade_side_min']:.1f} % (default "
+              f"{100 * agg['min_blade_side_min']:.1f} %)")
     print(f"wrote {save('flight_time', summary)}")
     if a.out:
         a.out.write_text(json.dumps(res, indent=1, default=float))

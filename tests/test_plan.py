@@ -1325,3 +1325,60 @@ def test_blade_chords_from_the_yaml_reach_the_model_and_its_clearance():
     assert plain.clearance(p[None])[0] > wide.clearance(p[None])[0] + 0.5
     with pytest.raises(ConfigError, match=r"turbines\[0\]\.blade: unknown key 'max_chord'"):
         mission_from_dict(_site({"blade": {"max_chord": 5.5}}))
+
+
+# ---- the tower's columns ------------------------------------------------------------------------
+P1_35 = Camera(8192, 5460, 35, 35.9)  # the default camera (Zenmuse P1, DL 35 mm)
+
+
+@pytest.mark.parametrize("cam, want", [(P1_35, 4), (CAM, 5)])
+def test_tower_columns_see_the_girth_and_one_fewer_does_not(cam, want):
+    """The count from the geometry, checked by the coverage measure itself on a band of the
+    tower near its base: every column count's level views from the plan's standoff."""
+    from wtcli.geometry.coverage import measure_coverage
+    from wtcli.plan.mission import pass_params
+    from wtcli.plan.paths import _camera_rotations, tower_columns
+    t = make_turbine(hub_height=98, rotor_diameter=150)
+    pp, gsd, _ = pass_params(Mission((t,), cam, settings=Settings()))
+    n = tower_columns(t.tower_base_radius, pp)
+    assert n == want
+    samples = t.surface_samples(0.25, "structure")
+    z = 6.0  # the lowest level a column's level views reach (min_altitude 5 m + 0.5)
+    band = (samples.part == t.part_names().index("tower")) & (np.abs(samples.points[:, 2] - z) < 0.5)
+    assert band.sum() > 50
+
+    def seen(columns: int, phase: float) -> float:
+        a = phase + 2 * np.pi * np.arange(columns) / columns
+        u = np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=1)
+        pos = t.base_xyz + (t.tower_radius_at(np.array([z]))[0] + pp.standoff) * u + [0, 0, z]
+        cov = measure_coverage(samples, cam, pos, _camera_rotations(-u), gsd, 60.0)
+        return cov.fraction(band)
+
+    for phase in (0.0, 0.3, 1.1):
+        assert seen(n, phase) > 0.999
+    assert seen(n - 1, 0.0) < 0.97
+
+
+@pytest.mark.parametrize("cam, columns", [(P1_35, 4), (CAM, 5)])
+def test_an_even_tower_is_climbed_on_the_way_up_and_ends_at_the_bottom(cam, columns):
+    """Four columns flown from the top would end at the top, a descent without photos before
+    the landing: one is flown bottom -> top before the overview photo instead. Five end at the
+    bottom as they are, all after the nacelle."""
+    t = make_turbine(hub_height=98, rotor_diameter=150)
+    plan = plan_mission(Mission((t,), cam, settings=Settings(min_side_coverage=0.0)))
+    r = plan.routes[0]
+    comp = [str(c) for c in r.component]
+    tower = [i for i, c in enumerate(comp) if c == "T1/tower" and r.photo[i]]
+    overview = comp.index("T1/overview")
+    climb = [i for i in tower if i < overview]
+    rest = [i for i in tower if i > overview]
+    if columns % 2 == 0:
+        z = r.pos[climb, 2]
+        assert len(climb) > 10 and (np.diff(z) > 0).all()  # upwards, photo after photo
+        assert z[0] < 8.0 and z[-1] > 0.9 * t.hub_height - 10.0
+        assert comp[climb[0] - 1] in ("launch", "transit")  # straight from the take-off
+    else:
+        assert not climb
+    assert r.pos[rest[-1], 2] < 8.0  # the last column ends at the bottom
+    assert set(comp[rest[-1] + 1:]) <= {"T1/tower", "return"}  # then home
+    assert_safe(plan, 3.0)

@@ -651,11 +651,11 @@ class FlightReport:
 
 
 # The tracking margin docs/fly.md ("Margins") documents per positioning mode: no clearance
-# violation over 20 seeds of paper-s2 at 8 and 10 m/s mean wind at hub height
-# (benchmarks/fly_margins.py). RTK that may degrade near the tower counts as float. At 12 m/s
-# every mode reached a blade (gusts beyond the vehicle's rated wind), so no margin is documented
-# above SAFE_HUB_WIND_MS and `fly` warns there.
-DOCUMENTED_MARGIN_M = {"rtk_fixed": 2.0, "rtk_float": 2.0, "gnss": 4.0}
+# violation and every flight's 99.9th percentile within it over 20 seeds of paper-s2 at 8 and
+# 10 m/s mean wind at hub height (benchmarks/fly_margins.py). RTK that may degrade near the
+# tower counts as float. At 12 m/s flights left the path by 21-23 m (gusts beyond the vehicle's
+# rated wind), so no margin is documented above SAFE_HUB_WIND_MS and `fly` warns there.
+DOCUMENTED_MARGIN_M = {"rtk_fixed": 2.0, "rtk_float": 2.5, "gnss": 4.0}
 SAFE_HUB_WIND_MS = 10.0
 
 

@@ -824,24 +824,54 @@ def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams) -> Chunk:
 
 
 TOWER_PHASES = 6  # column phases tried (fractions of the angle between columns)
+TOWER_GSD_TOLERANCE = 1.05 / 1.02  # pp.reach (the GSD + 2 %) to coverage's own GSD + 5 %
 TOWER_FOOT_DEG = 30.0  # each column's lowest view looks down this far, to the tower's foot
 
 
+def tower_columns(radius: float, pp: PassParams) -> int:
+    """The fewest level columns round a tower section of ``radius`` (the base: the widest) whose
+    views, each aimed at the axis from ``pp.standoff``, see its whole girth within the incidence
+    limit less RING_MARGIN_DEG, the frame less FACE_BORDER and the distance coverage counts
+    (the GSD's 5 %: the girth's seams are seen by two columns). From close up a view sees less
+    of the girth (perspective, distance): 5 columns at 5.1 m from a 2.6 m radius, 4 from 10.8 m;
+    never fewer than 4 (a view sees at most the incidence limit either side)."""
+    D = radius + pp.standoff
+    phi = np.radians(np.arange(0.0, 90.0, 0.25))
+    along = D - radius * np.cos(phi)  # the view's axis component of the ray to the surface point
+    dist = np.hypot(along, radius * np.sin(phi))
+    cos_inc = (D * np.cos(phi) - radius) / dist
+    half_frame = (1 - 2 * FACE_BORDER) * 0.5 * pp.camera.width_px / pp.camera.fx
+    reach = (pp.reach if pp.reach > 0 else pp.max_standoff) * TOWER_GSD_TOLERANCE
+    ok = (cos_inc >= math.cos(math.radians(pp.max_incidence_deg - RING_MARGIN_DEG))) & \
+        (radius * np.sin(phi) <= half_frame * along) & (dist <= reach)
+    seen = float(phi[np.argmin(ok) - 1] if not ok.all() else phi[-1])  # the last angle it sees
+    return max(4, int(math.ceil(math.pi / max(seen, 1e-3) - 1e-9)))
+
+
 def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
-                start_near: np.ndarray | None = None) -> Chunk:
-    chunk = Chunk(turbine.id, "tower")
+                start_near: np.ndarray | None = None,
+                climb_toward: np.ndarray | None = None) -> Chunk | tuple[Chunk, Chunk]:
+    """The tower in vertical columns of photos, flown top -> bottom, bottom -> top in turn from
+    the column nearest ``start_near``, joined by level arcs round the tower.
+
+    ``climb_toward``: with an even number of columns (which, flown from the top, would end at
+    the top), the tower as two chunks: the column nearest this point flown bottom -> top, the
+    climb to the rotor made a photo pass, and the others from the column next to it nearer
+    ``start_near``, top -> bottom first, so the last one ends at the bottom, by the landing."""
     rb, H = turbine.tower_base_radius, turbine.tower_height
     fw, fh = pp.camera.footprint_m(pp.standoff)
     if columns <= 0:
-        columns = max(5, int(math.ceil(2 * math.pi * rb / (0.5 * fw))))
+        columns = tower_columns(rb, pp)
+    split = climb_toward is not None and columns % 2 == 0
     spacing = max(0.25, (1 - pp.overlap) * fh)
     z_lo = pp.min_altitude + 0.5
     z_hi = H - 0.5 * spacing
     nz = max(2, int(math.ceil((z_hi - z_lo) / spacing)) + 1)
     zs = np.linspace(z_hi, z_lo, nz)  # top -> bottom
     yaw0 = math.atan2(turbine.axis[1], turbine.axis[0])
-    if start_near is not None:  # begin with the column nearest the previous point
-        v = np.asarray(start_near) - turbine.base_xyz
+    toward = climb_toward if split else start_near
+    if toward is not None:  # begin with the column nearest that point
+        v = np.asarray(toward) - turbine.base_xyz
         yaw0 = math.atan2(v[1], v[0])
     r = turbine.tower_radius_at(zs)
 
@@ -859,7 +889,7 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
 
     # The columns' phase: of TOWER_PHASES within a column's angle (nearest the start first), the
     # one that leaves out the fewest stations (a blade down in front of the tower) and whose
-    # first station the previous point reaches.
+    # first station the previous point reaches (the climbing column's: any, it is flown first).
     phases = [yaw0 + 2 * math.pi / columns * f for f in
               sorted(np.arange(TOWER_PHASES) / TOWER_PHASES, key=lambda f: min(f, 1 - f))]
     drops, firsts = [], []
@@ -869,7 +899,7 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
         drops.append(int((~ok).sum()))
         firsts.append(P[int(np.argmax(ok))] if ok.any() else None)
     for i in sorted(range(len(phases)), key=lambda i: (drops[i], i)):
-        if start_near is None or (firsts[i] is not None and connect(
+        if split or start_near is None or (firsts[i] is not None and connect(
                 site, np.asarray(start_near, float), firsts[i], pp.leg_required,
                 ground=pp.min_altitude) is not None):
             yaw0 = phases[i]
@@ -877,18 +907,29 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
     else:
         yaw0 = phases[0]
     comp = f"{turbine.id}/tower"
-    for j in range(columns):
+    order = list(range(columns))
+    if split:  # the rest round the tower from the climbing column's neighbour nearer start_near
+        def dist(j: int) -> float:
+            a = yaw0 + 2 * math.pi * j / columns
+            p = turbine.base_xyz + (rb + pp.standoff) * np.array([math.cos(a), math.sin(a), 0.0])
+            return float(np.linalg.norm(p[:2] - np.asarray(start_near, float)[:2])) \
+                if start_near is not None else 0.0
+        step = 1 if dist(1) <= dist(columns - 1) else -1
+        order = [0] + [(step * k) % columns for k in range(1, columns)]
+    climb, chunk = Chunk(turbine.id, "tower"), Chunk(turbine.id, "tower")
+    for n, j in enumerate(order):
+        target = climb if split and n == 0 else chunk
         ang = yaw0 + 2 * math.pi * j / columns
         pos, fwd = column(ang)
-        if j % 2 == 1:
+        if n % 2 == (0 if split else 1):  # bottom -> top: the climb, and every other column
             pos, fwd = pos[::-1], fwd[::-1]
         keep = _filter_stations(site, pp, pos, fwd)
         if (~keep).any():
-            chunk.notes.append(f"{comp}: column {j + 1}: {int((~keep).sum())} station(s) too close "
-                               "to a part: dropped")
+            target.notes.append(f"{comp}: column {n + 1}: {int((~keep).sum())} station(s) too "
+                                "close to a part: dropped")
         new: list[WP] = []
-        if chunk.wps and keep.any():  # arc around the tower at constant height to the next column
-            prev = chunk.wps[-1].pos
+        if target.wps and keep.any():  # arc around the tower at constant height to the next column
+            prev = target.wps[-1].pos
             a0 = math.atan2(prev[1] - turbine.base_xyz[1], prev[0] - turbine.base_xyz[0])
             da = (ang - a0 + math.pi) % (2 * math.pi) - math.pi
             steps = max(1, int(math.ceil(abs(da) / math.radians(20))))
@@ -901,8 +942,8 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
                 arc = arc[_filter_stations(site, pp, arc)]  # clear of every part and the ground
             new += [WP(v, None, False, comp) for v in arc]
         new += [WP(p, f, True, comp, standoff=pp.standoff) for p, f in zip(pos[keep], fwd[keep])]
-        append_chain(chunk, site, pp, new, droppable=True)
-    return chunk
+        append_chain(target, site, pp, new, droppable=True)
+    return (climb, chunk) if split else chunk
 
 
 def append_chain(chunk: Chunk, site: Site, pp: PassParams, new: list[WP],
