@@ -5,7 +5,9 @@
 
 Random turbines: rotor azimuth 0-120 deg, yaw 0-360 deg, rotor diameter 90/120/150 m, hub height
 R + 15..45 m; default mission settings (safe distance 3 m + 1 m tracking margin, 1.5 mm/px) with
-``min_side_coverage: 0`` so that no plan is refused for coverage. Coverage is the planner's own
+``min_side_coverage: 0`` so that no plan is refused for coverage, and a 16 mm lens on a 23.2 mm
+sensor (``CAM``: the sample site's camera, 5.1 m from the blade, where misses are to be found;
+the default camera's coverage is in ``flight_time.py``). Coverage is the planner's own
 prediction (``summary.predicted_coverage``: the one coverage measure on the converged sampling,
 ``turbine_coverage``, blade cells refined where covered and missed meet). ``--gimbal-max``: the
 gimbal's upward pitch limit (default 90: it looks straight up; an under-slung gimbal stops near 30).

@@ -261,7 +261,8 @@ SECTIONS: tuple[Section, ...] = (
         "Coverage", "plan_coverage",
         "python benchmarks/plan_coverage.py",
         "The planner's predicted coverage of every blade side over random single turbines, with "
-        "the settings `wtinspect plan` uses.",
+        "the settings `wtinspect plan` uses and a 16 mm lens on a 23.2 mm sensor (the sample "
+        "site's camera; the default camera's coverage is under Flight time per turbine).",
         (F("blade coverage, mean over cases", ("summary.blade_average_mean",), "{:.1%}"),
          F("worst blade side, mean / min over cases", ("summary.min_side_mean", "summary.min_side_min"),
            "{:.1%} / {:.1%}"),

@@ -1382,3 +1382,16 @@ def test_an_even_tower_is_climbed_on_the_way_up_and_ends_at_the_bottom(cam, colu
     assert r.pos[rest[-1], 2] < 8.0  # the last column ends at the bottom
     assert set(comp[rest[-1] + 1:]) <= {"T1/tower", "return"}  # then home
     assert_safe(plan, 3.0)
+
+
+def test_tower_columns_stay_within_what_the_yaml_allows_for_a_narrow_camera():
+    """A camera whose frame sees a sliver of the tower asks for many columns, at most 16
+    (mission.tower_columns' bound); the usual cameras ask for 4-6."""
+    from wtcli.plan.mission import pass_params
+    from wtcli.plan.paths import tower_columns
+    t = make_turbine(hub_height=98, rotor_diameter=150)
+    narrow = Camera(64, 48, 2000, 35.9)  # a 2 m lens on 64 px: 0.6 deg across
+    pp = pass_params(Mission((t,), narrow, settings=Settings()))[0]
+    assert tower_columns(t.tower_base_radius, pp) == 16
+    pp = pass_params(Mission((t,), P1_35, settings=Settings()))[0]
+    assert tower_columns(t.tower_base_radius, pp) == 4

@@ -824,6 +824,7 @@ def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams) -> Chunk:
 
 
 TOWER_PHASES = 6  # column phases tried (fractions of the angle between columns)
+TOWER_MAX_COLUMNS = 16  # mission.tower_columns' own upper bound
 TOWER_GSD_TOLERANCE = 1.05 / 1.02  # pp.reach (the GSD + 2 %) to coverage's own GSD + 5 %
 TOWER_FOOT_DEG = 30.0  # each column's lowest view looks down this far, to the tower's foot
 
@@ -844,8 +845,11 @@ def tower_columns(radius: float, pp: PassParams) -> int:
     reach = (pp.reach if pp.reach > 0 else pp.max_standoff) * TOWER_GSD_TOLERANCE
     ok = (cos_inc >= math.cos(math.radians(pp.max_incidence_deg - RING_MARGIN_DEG))) & \
         (radius * np.sin(phi) <= half_frame * along) & (dist <= reach)
-    seen = float(phi[np.argmin(ok) - 1] if not ok.all() else phi[-1])  # the last angle it sees
-    return max(4, int(math.ceil(math.pi / max(seen, 1e-3) - 1e-9)))
+    first_miss = int(np.argmin(ok)) if not ok.all() else len(phi)
+    seen = float(phi[first_miss - 1]) if first_miss > 0 else 0.0  # the last angle it sees
+    if seen <= 0.0:  # a frame too narrow to see the tower at all: the most the YAML allows
+        return TOWER_MAX_COLUMNS
+    return min(TOWER_MAX_COLUMNS, max(4, int(math.ceil(math.pi / seen - 1e-9))))
 
 
 def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
