@@ -831,20 +831,19 @@ TOWER_FOOT_DEG = 30.0  # each column's lowest view looks down this far, to the t
 
 def tower_columns(radius: float, pp: PassParams) -> int:
     """The fewest level columns round a tower section of ``radius`` (the base: the widest) whose
-    views, each aimed at the axis from ``pp.standoff``, see its whole girth within the incidence
-    limit less RING_MARGIN_DEG, the frame less FACE_BORDER and the distance coverage counts
-    (the GSD's 5 %: the girth's seams are seen by two columns). From close up a view sees less
-    of the girth (perspective, distance): 5 columns at 5.1 m from a 2.6 m radius, 4 from 10.8 m;
-    never fewer than 4 (a view sees at most the incidence limit either side)."""
-    D = radius + pp.standoff
-    phi = np.radians(np.arange(0.0, 90.0, 0.25))
-    along = D - radius * np.cos(phi)  # the view's axis component of the ray to the surface point
-    dist = np.hypot(along, radius * np.sin(phi))
-    cos_inc = (D * np.cos(phi) - radius) / dist
-    half_frame = (1 - 2 * FACE_BORDER) * 0.5 * pp.camera.width_px / pp.camera.fx
+    views, each aimed at the axis from ``pp.standoff``, see its whole girth by coverage's own
+    test (``imaged``) with the incidence limit less RING_MARGIN_DEG, the frame less FACE_BORDER
+    and the distance coverage counts (the GSD's 5 %: the girth's seams are seen by two columns).
+    From close up a view sees less of the girth (perspective, distance): 5 columns at 5.1 m from
+    a 2.6 m radius, 4 from 10.8 m; never fewer than 4 (a view sees at most the incidence limit
+    either side), never more than TOWER_MAX_COLUMNS."""
+    phi = np.radians(np.arange(0.0, 90.0, 0.25))  # round the section from the view's axis
+    n = np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], axis=1)
+    cam = np.array([radius + pp.standoff, 0.0, 0.0])
+    R = _camera_rotations(np.array([[-1.0, 0.0, 0.0]]))[0]
     reach = (pp.reach if pp.reach > 0 else pp.max_standoff) * TOWER_GSD_TOLERANCE
-    ok = (cos_inc >= math.cos(math.radians(pp.max_incidence_deg - RING_MARGIN_DEG))) & \
-        (radius * np.sin(phi) <= half_frame * along) & (dist <= reach)
+    ok = imaged(radius * n - cam, n, R, pp.camera, reach,
+                pp.max_incidence_deg - RING_MARGIN_DEG, FACE_BORDER)
     first_miss = int(np.argmin(ok)) if not ok.all() else len(phi)
     seen = float(phi[first_miss - 1]) if first_miss > 0 else 0.0  # the last angle it sees
     if seen <= 0.0:  # a frame too narrow to see the tower at all: the most the YAML allows
