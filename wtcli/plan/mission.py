@@ -208,13 +208,11 @@ def turbine_chunks(t: Turbine, site: Site, pp: PassParams, mission: Mission,
         if mission.settings.inspect_tower:
             # the overview photo always has a station, so some chunk before the tower has one
             last = next(c for c in reversed(chunks) if c.wps)
-            tower = tower_chunk(t, site, pp, mission.settings.tower_columns,
-                                start_near=last.end, climb_toward=sp)
-            if isinstance(tower, tuple):  # one column flown up on the way to the overview
-                chunks.insert(0, tower[0])
-                tower = tower[1]
+            *climb, tower = tower_chunk(t, site, pp, mission.settings.tower_columns,
+                                        start_near=last.end, climb_toward=sp)
+            chunks[:0] = climb  # a column flown up on the way to the overview, if any
             chunks.append(tower)
-            if not any(w.photo for c in chunks if c.name == "tower" for w in c.wps):
+            if not any(w.photo for c in climb + [tower] for w in c.wps):
                 _need_stations(tower, pp, "inspect_tower")
     except _Blocked as e:
         raise PlanError(f"turbine {t.id}: {e} keeping {pp.required:g} m (safe distance + tracking "

@@ -853,13 +853,13 @@ def tower_columns(radius: float, pp: PassParams) -> int:
 
 def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
                 start_near: np.ndarray | None = None,
-                climb_toward: np.ndarray | None = None) -> Chunk | tuple[Chunk, Chunk]:
+                climb_toward: np.ndarray | None = None) -> list[Chunk]:
     """The tower in vertical columns of photos, flown top -> bottom, bottom -> top in turn from
     the column nearest ``start_near``, joined by level arcs round the tower.
 
-    ``climb_toward``: with an even number of columns (which, flown from the top, would end at
-    the top), the tower as two chunks: the column nearest this point flown bottom -> top, the
-    climb to the rotor made a photo pass, and the others from the column next to it nearer
+    One chunk, or with ``climb_toward`` and an even number of columns (which, flown from the
+    top, would end at the top) two: the column nearest that point flown bottom -> top, the climb
+    to the rotor made a photo pass, and the others from the column next to it nearer
     ``start_near``, top -> bottom first, so the last one ends at the bottom, by the landing."""
     rb, H = turbine.tower_base_radius, turbine.tower_height
     fw, fh = pp.camera.footprint_m(pp.standoff)
@@ -912,10 +912,9 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
     comp = f"{turbine.id}/tower"
     order = list(range(columns))
     if split:  # the rest round the tower from the climbing column's neighbour nearer start_near
-        def dist(j: int) -> float:
-            a = yaw0 + 2 * math.pi * j / columns
-            p = turbine.base_xyz + (rb + pp.standoff) * np.array([math.cos(a), math.sin(a), 0.0])
-            return float(np.linalg.norm(p[:2] - np.asarray(start_near, float)[:2])) \
+        def dist(j: int) -> float:  # from column j's top station
+            top = column(yaw0 + 2 * math.pi * j / columns)[0][0]
+            return float(np.linalg.norm(top[:2] - np.asarray(start_near, float)[:2])) \
                 if start_near is not None else 0.0
         step = 1 if dist(1) <= dist(columns - 1) else -1
         order = [0] + [(step * k) % columns for k in range(1, columns)]
@@ -946,7 +945,7 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
             new += [WP(v, None, False, comp) for v in arc]
         new += [WP(p, f, True, comp, standoff=pp.standoff) for p, f in zip(pos[keep], fwd[keep])]
         append_chain(target, site, pp, new, droppable=True)
-    return (climb, chunk) if split else chunk
+    return [climb, chunk] if split else [chunk]
 
 
 def append_chain(chunk: Chunk, site: Site, pp: PassParams, new: list[WP],
