@@ -145,13 +145,17 @@ def test_photos_are_flown_within_the_capture_limits(swapped_plan):
     i = np.nonzero(r.photo)[0]
     # consecutive photos at least the camera's interval apart
     assert np.diff(r.t[i]).min() >= m.capture.min_photo_interval_s - 1e-6
-    # every inspection photo: the slower of the legs beside it within the capture speed (the
-    # overview, tens of metres from the rotor, has a blur limit above the cruise speed)
+    # every inspection photo: the slower of the legs beside it within the fleet's cap and the
+    # photo interval's limit (the overview, tens of metres from the rotor, has a blur limit
+    # above the cruise speed; each photo's own blur limit:
+    # test_every_photo_is_passed_within_the_blur_limit_of_the_nearest_surface)
+    lim = s["capture"]["limits"]
     near = i[[not str(c).endswith("/overview") for c in r.component[i]]]
     assert len(near) == len(i) - 1
     v_in = r.speed[near]
     v_out = np.r_[r.speed[1:], np.inf][near]
-    assert (np.minimum(v_in, v_out) <= v_cap + 1e-6).all()
+    assert (np.minimum(v_in, v_out)
+            <= min(lim["fleet_m_s"], lim["photo_interval_m_s"]) + 1e-6).all()
     # and the passes do fly at it (not at the fleet's cap)
     both = r.photo[1:] & r.photo[:-1] & (np.diff(r.t) > 0)
     assert np.median(r.speed[1:][both]) == pytest.approx(v_cap, rel=0.05)
@@ -197,3 +201,75 @@ def test_an_autopilot_flies_the_plan_in_about_the_planned_time(swapped_plan):
     ref = make_reference(r.t, r.pos, r.yaw_deg, r.gimbal_pitch_deg, 0.1, 0.0, ACCEL_M_S2, 0.05,
                          r.speed)
     assert r.duration_s <= ref.t[-1] <= 1.08 * r.duration_s
+
+
+@pytest.fixture(scope="module")
+def big_plan():
+    """A large turbine with the default camera (a DJI P1 35 mm: blades as rings of four passes,
+    the nacelle's underside in oblique rows, four tower columns with foot views)."""
+    c = default_dict()["camera"]
+    cam = Camera(c["width_px"], c["height_px"], c["focal_mm"], c["sensor_width_mm"])
+    t = Turbine.with_rotor_azimuth(20, id="T1", base=(0, 0, 0), hub_height=100,
+                                   rotor_diameter=150, yaw_deg=35)
+    m = Mission((t,), cam, settings=Settings(min_side_coverage=0.0))
+    return m, plan_mission(m)
+
+
+def test_every_photo_is_passed_within_the_blur_limit_of_the_nearest_surface(big_plan):
+    # Measured from the geometry, not from the standoff a station was planned at: the slower
+    # leg beside each photo within the blur limit at the photo's distance to the part it is of
+    # (its nearest surface: never a looser limit than the surface it images).
+    m, plan = big_plan
+    t, r = m.turbines[0], plan.routes[0]
+    i = np.nonzero(r.photo & np.array(["/overview" not in str(c) for c in r.component]))[0]
+    part = [t.part_names().index(str(c).split("/")[1]) for c in r.component[i]]
+    d = t.clearance_by_part(r.pos[i])[np.arange(len(i)), part]
+    limit = np.array([m.capture.blur_speed_m_s(float(m.camera.gsd_mm(x))) for x in d])
+    v = np.minimum(r.speed[i], np.r_[r.speed[1:], np.inf][i])
+    # (1 %: the blade distance is a slightly conservative lower bound, 10.74 m for 10.78)
+    assert (v <= 1.01 * limit).all(), r.component[i][v > 1.01 * limit]
+    # the tower's foot views (a few metres from the tower) are among them, passed slowly
+    tower = [str(c) == "T1/tower" for c in r.component[i]]
+    assert d[tower].min() < 6.0
+
+
+def test_rings_end_at_a_root_next_to_the_next_blade(big_plan):
+    # an even ring ends at the root (out and back in turn) on the side facing the next blade:
+    # no return leg to its start, and the hop to the next blade is a few metres
+    m, plan = big_plan
+    t, r = m.turbines[0], plan.routes[0]
+    comps = [str(c) for c in r.component]
+    assert not [c for c in comps if c.endswith("/return") and "blade" in c]
+    blades = [c.split("/")[1] for c in comps if "/blade" in c]
+    order = list(dict.fromkeys(blades))
+    assert len(order) == 3
+    for a, b in zip(order, order[1:]):
+        last = max(j for j, c in enumerate(comps) if f"/{a}/" in c)
+        first = min(j for j, c in enumerate(comps) if f"/{b}/" in c and r.photo[j])
+        hop = np.linalg.norm(np.diff(r.pos[last:first + 1], axis=0), axis=1).sum()
+        assert hop < 15.0, (a, b, hop)
+        # both ends at the root: within a few metres of the hub's edge
+        for j in (last, first):
+            assert np.linalg.norm(r.pos[j] - t.hub_center) < t.blade_root_offset + 15.0
+
+
+def test_nacelle_underside_in_oblique_rows_either_side_of_the_tower_top(big_plan):
+    # the default camera's standoff puts a row straight under the nacelle over the tower top:
+    # the underside is seen in two rows beside it, each looking up and in at its own half
+    m, plan = big_plan
+    t, r = m.turbines[0], plan.routes[0]
+    i = np.nonzero(r.photo & (r.component == "T1/nacelle"))[0]
+    up = i[r.gimbal_pitch_deg[i] > 20.0]
+    side = np.cross([0.0, 0.0, 1.0], t.axis)
+    off = (r.pos[up] - t.nacelle_center) @ side
+    assert (off > 0).sum() >= 2 and (off < 0).sum() >= 2
+    assert (r.pos[up, 2] < t.nacelle_center[2] - t.nacelle_height / 2).all()
+    assert t.clearance(r.pos[up]).min() >= m.settings.safe_distance_m + m.settings.tracking_margin_m
+    # the underside's whole width within the GSD's reach of one row or the other
+    from wtcli.geometry.coverage import measure_coverage
+    from wtcli.plan.mission import _photos_of
+    pos, rot = _photos_of(t, plan.routes)
+    samples = t.surface_samples(0.5)
+    cov = measure_coverage(samples, m.camera, pos, rot, plan.summary["coverage_gsd_mm"])
+    bottom = (samples.part == t.part_names().index("nacelle")) & (samples.normals[:, 2] < -0.9)
+    assert cov.fraction(bottom) > 0.9

@@ -1337,7 +1337,7 @@ def test_tower_columns_see_the_girth_and_one_fewer_does_not(cam, want):
     tower near its base: every column count's level views from the plan's standoff."""
     from wtcli.geometry.coverage import measure_coverage
     from wtcli.plan.mission import pass_params
-    from wtcli.plan.paths import _camera_rotations, tower_columns
+    from wtcli.plan.paths import _camera_rotations, tower_columns, tower_standoff
     t = make_turbine(hub_height=98, rotor_diameter=150)
     pp, gsd, _ = pass_params(Mission((t,), cam, settings=Settings()))
     n = tower_columns(t.tower_base_radius, pp)
@@ -1347,16 +1347,24 @@ def test_tower_columns_see_the_girth_and_one_fewer_does_not(cam, want):
     band = (samples.part == t.part_names().index("tower")) & (np.abs(samples.points[:, 2] - z) < 0.5)
     assert band.sum() > 50
 
-    def seen(columns: int, phase: float) -> float:
+    def seen(columns: int, phase: float, standoff: float = pp.standoff) -> float:
         a = phase + 2 * np.pi * np.arange(columns) / columns
         u = np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=1)
-        pos = t.base_xyz + (t.tower_radius_at(np.array([z]))[0] + pp.standoff) * u + [0, 0, z]
+        pos = t.base_xyz + (t.tower_radius_at(np.array([z]))[0] + standoff) * u + [0, 0, z]
         cov = measure_coverage(samples, cam, pos, _camera_rotations(-u), gsd, 60.0)
         return cov.fraction(band)
 
     for phase in (0.0, 0.3, 1.1):
         assert seen(n, phase) > 0.999
     assert seen(n - 1, 0.0) < 0.97
+    # the columns fly out as far as they still see the girth (a looser blur limit): farther
+    # than the blades' standoff, within the GSD's distance, and still seeing all of it
+    e = tower_standoff(t.tower_base_radius, pp, n)
+    assert pp.standoff <= e <= pp.max_standoff
+    for phase in (0.0, 0.3, 1.1):
+        assert seen(n, phase, e) > 0.999
+    if e + 0.25 <= pp.max_standoff:  # stopped by the girth, not the GSD: a metre farther
+        assert seen(n, 0.0, e + 1.0) < 0.999  # (beyond the planning margins) it is not seen
 
 
 @pytest.mark.parametrize("cam, columns", [(P1_35, 4), (CAM, 5)])
@@ -1395,3 +1403,26 @@ def test_tower_columns_stay_within_what_the_yaml_allows_for_a_narrow_camera():
     assert tower_columns(t.tower_base_radius, pp) == 16
     pp = pass_params(Mission((t,), P1_35, settings=Settings()))[0]
     assert tower_columns(t.tower_base_radius, pp) == 4
+
+
+def test_unit_order_is_the_shortest_of_every_order_and_direction():
+    """The nacelle's faces: the dynamic programme against trying every order and direction."""
+    import itertools
+
+    from wtcli.plan.paths import _unit_order
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 3, 5):
+        for _ in range(5):
+            cost = rng.uniform(0, 50, (2 * n, 2 * n))
+            first = rng.uniform(0, 50, 2 * n)
+
+            def total(plan):
+                nodes = [(2 * i + f, 2 * i + 1 - f) for i, f in plan]
+                return first[nodes[0][0]] + sum(cost[a[1], b[0]] for a, b in zip(nodes, nodes[1:]))
+
+            best = min(total(list(zip(order, flips)))
+                       for order in itertools.permutations(range(n))
+                       for flips in itertools.product((0, 1), repeat=n))
+            got = _unit_order(cost, first)
+            assert sorted(i for i, _ in got) == list(range(n))
+            assert total(got) == pytest.approx(best)

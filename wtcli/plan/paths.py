@@ -33,7 +33,7 @@ from __future__ import annotations
 import functools
 import itertools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -438,13 +438,17 @@ def _ring_passes(turbine: Turbine, k: int, site: Site, pp: PassParams, label: st
 
 def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str,
                 split_sides: frozenset[str] | set[str] = frozenset(),
-                ring_first: bool = False) -> Chunk:
+                ring_first: bool = False, start_near: np.ndarray | None = None,
+                end_toward: np.ndarray | None = None) -> Chunk:
     """All four sides of blade k (index), as passes joined by arcs, ending at its start point.
 
     ``split_sides``: sides flown as two oblique passes everywhere (a wide chord's flat sides,
     whose edges a single head-on pass sees beyond the incidence limit). ``ring_first``: a ring
     of four or five oblique passes round the blade (``_ring_passes``) where one sees every
-    section; side by side where none does."""
+    section; side by side where none does. A ring of four given ``start_near`` (where the
+    drone comes from) starts at the pass and goes round in the direction that make the way in
+    and out (to ``end_toward``) shortest (``_ring_order``), and ends at the root of its last
+    pass instead of returning to its start: its ends are already at the root."""
     chunk = Chunk(turbine.id, f"blade{k + 1}")
     d, c, n = turbine.blade_frame(k)
     spacing = pp.spacing(pp.standoff)
@@ -456,6 +460,9 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
         chunk.pattern, passes = f"ring{ring[0]}", ring[1]
         chunk.notes += ring[2]
         S = S[:0]
+    no_return = ring is not None and len(passes) % 2 == 0 and start_near is not None
+    if no_return:
+        passes = _ring_order(passes, start_near, end_toward)
     extra = [0.0] + [e for e in (0.5, 1.0, 1.5) if pp.standoff + e <= pp.max_standoff]
     closer = [e for e in (-0.5, -1.0) if pp.standoff + e >= pp.min_standoff]
     for side in BLADE_SIDES if len(S) >= 2 else ():
@@ -552,6 +559,8 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
     if not wps:
         chunk.notes.append(f"{label}: no safe station at all")
         return chunk
+    if no_return:
+        return chunk
     # Eq. 8's return leg: back to the blade's start point S_p,i.
     start = wps[0]
     try:
@@ -561,6 +570,26 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
         chunk.notes.append(f"{label}: no safe return to the blade's start point; the flight "
                            "goes on from the last pass")
     return chunk
+
+
+def _ring_order(passes: list, start_near: np.ndarray, end_toward: np.ndarray | None) -> list:
+    """An even ring's passes (in ring order, each root -> tip) rotated and maybe reversed so that
+    the first pass's root end is near ``start_near`` and the last's root end (where the ring
+    ends: out and back in turn) near ``end_toward``: the shortest sum of the two, straight."""
+    n = len(passes)
+    best, out = math.inf, passes
+    for i0 in range(n):
+        for step in (1, -1):
+            order = [passes[(i0 + step * j) % n] for j in range(n)]
+            flown = [p for p in order if len(p[1])]
+            if not flown:
+                return passes
+            cost = float(np.linalg.norm(flown[0][1][0] - start_near))
+            if end_toward is not None:
+                cost += float(np.linalg.norm(flown[-1][1][0] - end_toward))
+            if cost < best - 1e-9:
+                best, out = cost, order
+    return out
 
 
 def _gimbal_alpha(c: np.ndarray, n: np.ndarray, g0: float, sign: float,
@@ -574,6 +603,10 @@ def _gimbal_alpha(c: np.ndarray, n: np.ndarray, g0: float, sign: float,
     up = np.degrees(np.arcsin(np.clip(-(np.cos(g) * c[2] + np.sin(g) * n[2]), -1.0, 1.0)))
     ok = (up >= pitch_range[0] + margin) & (up <= pitch_range[1] - margin)
     return float(a[np.argmax(ok)]) if ok.any() else None
+
+
+ARC_STEP_DEG = 15.0  # an arc round a blade in steps this fine is flown near the turn speed: the
+# timing's junction deviation passes a 15 deg corner at ~3.8 m/s, a 30 deg one at ~1.9 m/s
 
 
 def _arc(turbine: Turbine, frame: tuple, s: float, g_from: float, g_to: float, radius: float,
@@ -622,7 +655,8 @@ def _join(wps: list[WP], q: np.ndarray, q_fwd: np.ndarray, turbine: Turbine, k: 
                     vias = []
                     if abs(s - sp) > 1e-6:
                         vias.append(hc + s * d + (p - hc - sp * d))
-                    vias += _arc(turbine, (d, c, n), s, gp, gq, radius if s <= s_end else rp, long_way)
+                    vias += _arc(turbine, (d, c, n), s, gp, gq, radius if s <= s_end else rp, long_way,
+                                 step_deg=ARC_STEP_DEG)
                     if abs(s - sq) > 1e-6:
                         vias.append(hc + s * d + (q - hc - sq * d))
                     yield vias
@@ -665,7 +699,12 @@ def _join(wps: list[WP], q: np.ndarray, q_fwd: np.ndarray, turbine: Turbine, k: 
                 site.above_ground(P, pp.min_altitude)
             np.logical_and.at(good, np.array(pown), okp)
         if good.any():
-            wps += [WP(v, None, False, comp) for v in batch[int(np.argmax(good))]]
+            # The camera kept on the blade axis along the way: its turn spread over the arc
+            # (given all at the last leg it would hold that leg to the gimbal's rate).
+            vias = batch[int(np.argmax(good))]
+            fw = [_unit(-(v - hc - float((v - hc) @ d) * d)) for v in vias]
+            wps += [WP(v, f if pp.aim_ok(f[None])[0] else None, False, comp)
+                    for v, f in zip(vias, fw)]
             return
     vias = connect(site, p, q, pp.leg_required, hints=[_unit(p - hc - sp * d)],
                    ground=pp.min_altitude)
@@ -764,9 +803,43 @@ def _face_turn(site: Site, pp: PassParams, pos: np.ndarray, fwd: np.ndarray,
     return pos, fwd, bad
 
 
-def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams) -> Chunk:
+UNDERSIDE_TILT_DEG = (20.0, 30.0, 40.0, 50.0)  # the underside's halves seen from beside the tower
+
+
+def _underside_rows(site: Site, pp: PassParams, c: np.ndarray, u: np.ndarray, v: np.ndarray,
+                    half_u: float, half_v: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The nacelle's underside as two rows along it, one each side of the tower top, each
+    looking up at its own half tilted out by the least of UNDERSIDE_TILT_DEG whose stations all
+    keep the clearance (rows straight below would stand over the tower top), its half's far
+    edge within the GSD's reach (``pp.reach``) and the incidence limit. [] if none does."""
+    rows = []
+    for sign in (1.0, -1.0):
+        ctr = c + sign * 0.5 * half_v * v
+        for b in np.radians(UNDERSIDE_TILT_DEG):
+            nrm = math.cos(b) * -Z + math.sin(b) * sign * v
+            (pos, fwd), = _face_rows(ctr, nrm, u, v, half_u, 0.5 * half_v, pp, sign * v)
+            # the half's far edge, the underside's middle line, abreast of each station
+            far = c + ((pos - c) @ u)[:, None] * u
+            rel = pos - far
+            dist = np.linalg.norm(rel, axis=1)
+            inc = np.degrees(np.arccos(np.clip(-rel[:, 2] / dist, -1.0, 1.0)))
+            if (dist > pp.reach).any() or (inc > pp.max_incidence_deg - RING_MARGIN_DEG).any():
+                break
+            if _filter_stations(site, pp, pos, fwd).all():
+                rows.append((pos, fwd))
+                break
+        else:
+            return []
+        if len(rows) < (1 if sign > 0 else 2):
+            return []
+    return rows
+
+
+def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams,
+                  start_near: np.ndarray | None = None) -> Chunk:
     """The nacelle's left side, rear face, right side, top and underside, each in rows of
-    photos that cover the face (``_face_rows``). The front face is the hub's: not flown."""
+    photos that cover the face (``_face_rows``), in the order with the shortest joins (and way
+    in from ``start_near``). The front face is the hub's: not flown."""
     chunk = Chunk(turbine.id, "nacelle")
     a = turbine.axis
     side = np.cross(Z, a)
@@ -782,45 +855,84 @@ def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams) -> Chunk:
         (ctr - Z * half[2], -Z, a, side, half[0], half[1], side)]
     flown: list[tuple[np.ndarray, np.ndarray]] = []
     for i, (c, nrm, u, v, hu, hv, tilt) in enumerate(faces):
-        rows = _face_rows(c, nrm, u, v, hu, hv, pp, tilt)
-        pos = np.vstack([r[0] for r in rows])
-        fwd = np.vstack([r[1] for r in rows])
-        pos = _back_off(site, pp, pos, fwd)
-        keep = _filter_stations(site, pp, pos, fwd)
-        pos, fwd, bad = _face_turn(site, pp, pos, fwd, (u, v), ~keep)
-        keep = ~bad
-        if i == len(faces) - 1 and keep.sum() < 2:  # a lone underside photo: not worth the detour
-            chunk.notes.append(f"{comp}: underside: {int(keep.sum())} station(s) clear of the tower "
-                               "top and within the gimbal's reach: not flown")
-            continue
-        if (~keep).any():
-            aimless = int((~pp.aim_ok(fwd)).sum())
-            chunk.notes.append(f"{comp}: {int((~keep).sum())} station(s) too close to a part"
-                               + (f" or beyond {pp.gimbal_text()}" if aimless else "") + ": dropped")
-        if keep.any():
-            flown.append((pos[keep], fwd[keep]))
+        under = i == len(faces) - 1
+        # the underside's two oblique rows are flown as two units (the tower top between them)
+        units = _underside_rows(site, pp, c, u, v, hu, hv) if under else []
+        if not units:
+            rows = _face_rows(c, nrm, u, v, hu, hv, pp, tilt)
+            units = [(np.vstack([r[0] for r in rows]), np.vstack([r[1] for r in rows]))]
+        for pos, fwd in units:
+            pos = _back_off(site, pp, pos, fwd)
+            keep = _filter_stations(site, pp, pos, fwd)
+            pos, fwd, bad = _face_turn(site, pp, pos, fwd, (u, v), ~keep)
+            keep = ~bad
+            if under and keep.sum() < 2:  # a lone underside photo: not worth the detour
+                chunk.notes.append(f"{comp}: underside: {int(keep.sum())} station(s) clear of the "
+                                   "tower top and within the gimbal's reach: not flown")
+                continue
+            if (~keep).any():
+                aimless = int((~pp.aim_ok(fwd)).sum())
+                chunk.notes.append(f"{comp}: {int((~keep).sum())} station(s) too close to a part"
+                                   + (f" or beyond {pp.gimbal_text()}" if aimless else "")
+                                   + ": dropped")
+            if keep.any():
+                flown.append((pos[keep], fwd[keep]))
     if not flown:
         return chunk
-    # The faces in the order and directions with the shortest joins (all of them tried; a join
-    # through the nacelle counts twice its length plus 20 m: it is flown round).
+    # The faces in the order and directions with the shortest joins (a join through the
+    # nacelle counts twice its length plus 20 m: it is flown round).
     ends = np.array([f[0][x] for f in flown for x in (0, -1)])  # face i: start 2i, end 2i + 1
     E0, E1 = np.repeat(ends, len(ends), axis=0), np.tile(ends, (len(ends), 1))
     L = np.linalg.norm(E1 - E0, axis=1)
     blocked = site.segment_clearance(E0, E1, LEG_STEP, pp.required) < pp.leg_required
     cost = (L + blocked * (L + 20.0)).reshape(len(ends), len(ends))
-    best, plan = np.inf, []
-    for order in itertools.permutations(range(len(flown))):
-        for flips in itertools.product((0, 1), repeat=len(flown)):
-            c = sum(cost[2 * a + 1 - fa, 2 * b + fb] for a, b, fa, fb in
-                    zip(order, order[1:], flips, flips[1:]))
-            if c < best - 1e-9:
-                best, plan = c, list(zip(order, flips))
-    for i, flip in plan:
+    first = np.zeros(len(ends)) if start_near is None else \
+        np.linalg.norm(ends - np.asarray(start_near, float), axis=1)
+    part = turbine.part_names().index("nacelle")
+    for i, flip in _unit_order(cost, first):
         pos, fwd = flown[i] if not flip else (flown[i][0][::-1], flown[i][1][::-1])
-        # _back_off only moves a station out (a coarser GSD: a looser blur limit)
-        append_chain(chunk, site, pp, [WP(p, f, True, comp, standoff=pp.standoff)
-                                       for p, f in zip(pos, fwd)], droppable=True)
+        # the blur limit from the nearest nacelle surface: an oblique or backed-off station's
+        # distance to it differs from the standoff its face was planned at
+        near = turbine.clearance_by_part(pos)[:, part]
+        append_chain(chunk, site, pp, [WP(p, f, True, comp, standoff=float(d))
+                                       for p, f, d in zip(pos, fwd, near)], droppable=True)
     return chunk
+
+
+def _unit_order(cost: np.ndarray, first: np.ndarray) -> list[tuple[int, int]]:
+    """The order and directions (unit, flipped) of units flown end to end with the least total
+    join ``cost`` (node 2i: unit i's first station, 2i + 1: its last; a flipped unit is flown
+    from its last) plus ``first`` (the way in to the first node): exact, by dynamic programming
+    over subsets (Held-Karp)."""
+    n = len(cost) // 2
+    full = (1 << n) - 1
+    best: dict[tuple[int, int], tuple[float, tuple[int, int] | None]] = {}
+    for i in range(n):
+        for f in (0, 1):  # (mask, node the drone stands at) -> (cost, previous state)
+            key = (1 << i, 2 * i + 1 - f)
+            c = float(first[2 * i + f])
+            if key not in best or c < best[key][0]:
+                best[key] = (c, None)
+    for mask in range(1, full + 1):
+        for end in range(2 * n):
+            if (mask, end) not in best:
+                continue
+            c0 = best[(mask, end)][0]
+            for j in range(n):
+                if mask >> j & 1:
+                    continue
+                for g in (0, 1):
+                    key = (mask | 1 << j, 2 * j + 1 - g)
+                    c = c0 + float(cost[end, 2 * j + g])
+                    if key not in best or c < best[key][0] - 1e-9:
+                        best[key] = (c, (mask, end))
+    state = min(((full, e) for e in range(2 * n) if (full, e) in best), key=lambda k: best[k][0])
+    out = []
+    while state is not None:
+        mask, end = state
+        out.append((end // 2, 1 - end % 2))  # ending at its first station: flown flipped
+        state = best[state][1]
+    return out[::-1]
 
 
 TOWER_PHASES = 6  # column phases tried (fractions of the angle between columns)
@@ -851,6 +963,19 @@ def tower_columns(radius: float, pp: PassParams) -> int:
     return min(TOWER_MAX_COLUMNS, max(4, int(math.ceil(math.pi / seen - 1e-9))))
 
 
+def tower_standoff(radius: float, pp: PassParams, columns: int) -> float:
+    """The farthest standoff, from ``pp.standoff`` out to ``pp.max_standoff`` (the GSD's
+    distance) in 0.25 m steps, from which ``columns`` columns still see the girth of a section
+    of ``radius`` by ``tower_columns``' own test: a coarser GSD on the column's line, still within
+    the target where the girth meets the next column's view, is a looser blur limit."""
+    best = pp.standoff
+    for e in np.arange(pp.standoff + 0.25, pp.max_standoff + 1e-9, 0.25):
+        if tower_columns(radius, replace(pp, standoff=float(e))) > columns:
+            break
+        best = float(e)
+    return best
+
+
 def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
                 start_near: np.ndarray | None = None,
                 climb_toward: np.ndarray | None = None) -> list[Chunk]:
@@ -862,9 +987,10 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
     to the rotor made a photo pass, and the others from the column next to it nearer
     ``start_near``, top -> bottom first, so the last one ends at the bottom, by the landing."""
     rb, H = turbine.tower_base_radius, turbine.tower_height
-    fw, fh = pp.camera.footprint_m(pp.standoff)
     if columns <= 0:
         columns = tower_columns(rb, pp)
+    pp = replace(pp, standoff=tower_standoff(rb, pp, columns))
+    fw, fh = pp.camera.footprint_m(pp.standoff)
     split = climb_toward is not None and columns % 2 == 0
     spacing = max(0.25, (1 - pp.overlap) * fh)
     z_lo = pp.min_altitude + 0.5
@@ -934,16 +1060,22 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
             prev = target.wps[-1].pos
             a0 = math.atan2(prev[1] - turbine.base_xyz[1], prev[0] - turbine.base_xyz[0])
             da = (ang - a0 + math.pi) % (2 * math.pi) - math.pi
-            steps = max(1, int(math.ceil(abs(da) / math.radians(20))))
+            steps = max(1, int(math.ceil(abs(da) / math.radians(ARC_STEP_DEG))))
             rr = float(np.hypot(*(prev[:2] - turbine.base_xyz[:2])))
-            arc = np.array([turbine.base_xyz + np.array([rr * math.cos(a0 + da * s / steps),
-                                                         rr * math.sin(a0 + da * s / steps),
-                                                         prev[2] - turbine.base_xyz[2]])
-                            for s in range(1, steps)]).reshape(-1, 3)
+            angs = a0 + da * np.arange(1, steps) / steps
+            arc = turbine.base_xyz + np.column_stack([rr * np.cos(angs), rr * np.sin(angs),
+                                                      np.full(len(angs), prev[2]
+                                                              - turbine.base_xyz[2])])
+            # the camera kept on the tower's axis: its turn spread over the arc
+            look = -np.column_stack([np.cos(angs), np.sin(angs), np.zeros(len(angs))])
             if len(arc):
-                arc = arc[_filter_stations(site, pp, arc)]  # clear of every part and the ground
-            new += [WP(v, None, False, comp) for v in arc]
-        new += [WP(p, f, True, comp, standoff=pp.standoff) for p, f in zip(pos[keep], fwd[keep])]
+                ok = _filter_stations(site, pp, arc)  # clear of every part and the ground
+                arc, look = arc[ok], look[ok]
+            new += [WP(v, f, False, comp) for v, f in zip(arc, look)]
+        # the blur limit from the nearest tower surface (the foot view's is much nearer)
+        near = turbine.clearance_by_part(pos[keep])[:, turbine.part_names().index("tower")]
+        new += [WP(p, f, True, comp, standoff=float(d))
+                for p, f, d in zip(pos[keep], fwd[keep], near)]
         append_chain(target, site, pp, new, droppable=True)
     return [climb, chunk] if split else [chunk]
 
@@ -1154,7 +1286,8 @@ def insert_views(chunk: Chunk, views: list[tuple[np.ndarray, np.ndarray, str]], 
                                     np.r_[np.tile(pos, (len(order), 1)), P[order + 1]],
                                     LEG_STEP, pp.required)
         good = (lb[:len(order)] >= pp.leg_required) & (lb[len(order):] >= pp.leg_required)
-        new = WP(pos, fwd, True, comp)
+        # the blur limit from the nearest surface (a view may stand well inside the standoff)
+        new = WP(pos, fwd, True, comp, standoff=float(site.clearance(pos[None])[0]))
         if good.any():
             i = int(order[np.argmax(good)])
             chunk.wps.insert(i + 1, new)
