@@ -44,6 +44,9 @@ GSD_FILL = 0.9  # nominal standoff = this fraction of the distance that gives th
 MAX_LEG_ROUNDS = 8  # dry runs of the routes at most (each connects the legs the last one named)
 SPLIT_BELOW = 0.985  # a single-pass flat side below this predicted coverage is flown split
 GAP_ROUNDS = 2  # further rounds of gap views for a side still below min_side_coverage
+GAP_SIDE_BELOW = 0.995  # a blade gets extra views when one of its sides is predicted below
+# this: each is a detour of 10-20 s flown at the blur limit of a view nearer than the passes,
+# so views chasing the last half percent of a side cost a minute of flight per turbine
 Z = np.array([0.0, 0.0, 1.0])
 
 
@@ -99,6 +102,12 @@ class Speeds:
     cruise: float  # transits
     climb: float  # vertical speed limit
     interval: float = 0.0  # the camera's shortest time between photos, s
+    # a leg between two photos longer than this is a join (between passes or faces, to an
+    # extra view), flown at the turn speed; its ends are passed at their limits all the same
+    pass_leg_m: float = math.inf
+
+    def is_pass_leg(self, length: np.ndarray) -> np.ndarray:
+        return np.asarray(length) <= self.pass_leg_m
 
     def blur(self, standoff: float | None) -> float:
         return self.blur_per_m * (self.closest if standoff is None else standoff)
@@ -107,11 +116,14 @@ class Speeds:
 def speeds(mission: Mission, pp: PassParams) -> Speeds:
     fl, cap = mission.fleet, mission.capture
     v_fleet = min(fl.inspection_speed_m_s, fl.max_speed_m_s)
+    # The longest a pass puts between photos is (1 - overlap) of the footprint's longer side
+    # (a nacelle row along it) at the farthest standoff; half as much again is a join.
+    pass_leg = 1.5 * max(0.25, (1 - pp.overlap) * max(pp.camera.footprint_m(pp.max_standoff)))
     return Speeds(min(v_fleet, cap.interval_speed_m_s(pp.spacing(pp.standoff))),
                   cap.blur_speed_m_s(float(pp.camera.gsd_mm(1.0))),
                   max(pp.min_standoff, pp.standoff - 1.0),  # blade_chunk's closest candidates
                   v_fleet, min(fl.cruise_speed_m_s, fl.max_speed_m_s), fl.climb_rate_m_s,
-                  cap.min_photo_interval_s)
+                  cap.min_photo_interval_s, pass_leg)
 
 
 def capture_speed(mission: Mission, pp: PassParams,
@@ -132,27 +144,34 @@ def capture_speed(mission: Mission, pp: PassParams,
 
 def leg_speeds(wps: list[WP], sp: Speeds) -> np.ndarray:
     """The speed of each leg wps[i] -> wps[i + 1]: cruise (``slow`` False), else the capture
-    speed between two photos, the turn speed on the others; and no photo station is passed
+    speed between two photos along a pass (a longer leg between two photos is a join:
+    ``Speeds.pass_leg_m``), the turn speed on the others; and no photo station is passed
     faster than its motion-blur limit: at least one leg beside it is no faster (the flight's
-    speed at a waypoint is at most the slower of its two legs: fly's reference), else the leg
-    into it is slowed."""
+    speed at a waypoint is at most the slower of its two legs: fly's reference). A leg between
+    two photos is held to the looser of its ends' limits (along a pass, their common one); a
+    station whose legs are both still faster (an extra view nearer the surface than the pass
+    it sits in, a view between turns) has the shorter of them slowed to its limit, the
+    tightest limits first (a leg slowed for one station serves its neighbour too)."""
     n = len(wps)
     if n < 2:
         return np.zeros(0)
     slow = np.array([w.slow for w in wps[1:]], bool)
     photo = np.array([w.photo for w in wps], bool)
     vb = np.array([sp.blur(w.standoff) if w.photo else np.inf for w in wps])
-    both = slow & photo[:-1] & photo[1:]
+    P = np.array([w.pos for w in wps])
+    L = np.linalg.norm(np.diff(P, axis=0), axis=1)
+    both = slow & photo[:-1] & photo[1:] & sp.is_pass_leg(L)
     v = np.where(~slow, sp.cruise, np.where(both, sp.capture, sp.turn))
-    v = np.where(both, np.minimum(v, np.minimum(vb[:-1], vb[1:])), v)
-    v_in = np.r_[np.inf, v]  # per waypoint: the legs into and out of it
-    v_out = np.r_[v, np.inf]
-    over = photo & (np.minimum(v_in, v_out) > vb)
-    idx = np.nonzero(over)[0]
-    idx_in = idx[idx > 0]
-    v[idx_in - 1] = vb[idx_in]
-    if len(idx) and idx[0] == 0:
-        v[0] = min(v[0], vb[0])
+    v = np.where(both, np.minimum(v, np.maximum(vb[:-1], vb[1:])), v)
+
+    def over(i: int) -> bool:
+        return min(v[i - 1] if i > 0 else np.inf, v[i] if i < n - 1 else np.inf) > vb[i]
+
+    for i in sorted((i for i in np.nonzero(photo)[0] if over(i)), key=lambda i: vb[i]):
+        if over(i):
+            legs = [j for j in (i - 1, i) if 0 <= j < n - 1]
+            j = min(legs, key=lambda j: L[j])
+            v[j] = vb[i]
     return v
 
 
@@ -555,7 +574,7 @@ def _timed_route(uav: str, wps: list[WP], swaps: list[int], sp: Speeds, swap_s: 
     starts, ends = [0] + list(swaps), [i - 1 for i in swaps] + [n - 1]
     sorties = [float(t[b] - t[a]) for a, b in zip(starts, ends)]
     comp = np.array([w.component for w in wps], dtype=object)
-    budget = _time_budget(wps, dt, wait, extra, turbines or [])
+    budget = _time_budget(wps, dt, wait, extra, turbines or [], sp)
     return Route(uav, t, pos, speed, yaw, pitch, photo, comp,
                  summary={"battery_swaps": len(swaps), "sorties": len(swaps) + 1,
                           "longest_sortie_s": max(sorties), "time_budget": budget})
@@ -584,10 +603,11 @@ BUDGET_KEYS = ("capture_s", "turns_s", "hover_s", "transit_s", "climbs_s", "batt
 
 
 def _time_budget(wps: list[WP], dt: np.ndarray, wait: np.ndarray, swap: np.ndarray,
-                 turbines: list[str]) -> dict[str, dict[str, float]]:
+                 turbines: list[str], sp: Speeds | None = None) -> dict[str, dict[str, float]]:
     """Each leg's time, by turbine and kind: ``capture_s`` along a pass between two photos
-    (slowed to the photo interval where it binds), ``turns_s`` the other inspection-speed legs (at the turn speed)
-    (arcs round a blade, joins between passes, the blade's return leg, extra views' detours),
+    (slowed to the photo interval where it binds), ``turns_s`` the other inspection-speed legs
+    (arcs round a blade, joins between passes even from photo to photo, the blade's return leg,
+    extra views' detours),
     ``hover_s`` waiting for the camera elsewhere, ``transit_s`` cruise-speed legs (between
     components and turbines, to and from the launch point), ``climbs_s`` the vertical take-off
     and landing at the launch point, ``battery_swaps_s`` on the ground. A leg belongs to the
@@ -623,7 +643,8 @@ def _time_budget(wps: list[WP], dt: np.ndarray, wait: np.ndarray, swap: np.ndarr
         elif not z.slow:
             b["transit_s"] += float(dt[i])
             b["hover_s"] += float(wait[i])
-        elif a.photo and z.photo:
+        elif a.photo and z.photo and (sp is None or sp.is_pass_leg(
+                float(np.linalg.norm(z.pos - a.pos)))):
             b["capture_s"] += float(dt[i] + wait[i])
         else:
             b["turns_s"] += float(dt[i])
@@ -723,7 +744,11 @@ def _chunks(job: tuple) -> list[Chunk]:
         # the tower), within 2 % of the coverage GSD (the measure allows 5 %: the rest is left
         # for the flight's position error); a side still short is flown split.
         reach = mission.camera.distance_for_gsd(1.02 * gsd_eval)
-        views, covered = gap_plan(t, cov.samples, cov.covered, site, pp, s.max_incidence_deg, reach)
+        before = cov.by_blade_side()
+        wanting = {int(b[5:]) - 1 for b, sides in before.items()
+                   if min(sides.values()) < GAP_SIDE_BELOW}
+        views, covered = gap_plan(t, cov.samples, cov.covered, site, pp, s.max_incidence_deg, reach,
+                                  wanting)
         split: dict[int, set[str]] = {}
         predicted = Coverage(cov.samples, covered, cov.best_gsd_mm).by_blade_side()
         for b, sides in predicted.items():

@@ -384,12 +384,13 @@ def _ring_passes(turbine: Turbine, k: int, site: Site, pp: PassParams, label: st
     """Blade k flown as one of RINGS: passes root -> tip at fixed angles round the blade, each
     imaging parts of two or three sides obliquely, the fewest that see the whole section at
     every station (``_ring_standoffs``, at the farthest standoff between ``pp.min_standoff``
-    and ``pp.standoff`` that works: a looser blur limit). (views per station, passes), each
+    and ``pp.max_standoff``, the GSD's distance, that works: a looser blur limit, and no finer
+    GSD than the section needs). (views per station, passes), each
     pass named after the side nearest its angle, and notes on the stations left out. None if
     no ring sees every section, or a pass
     has more than RING_MAX_DROPPED blocked stations (clearance, ground, gimbal): the blade is
     then flown side by side."""
-    E = np.arange(pp.standoff, max(pp.min_standoff, pp.standoff - 2.0) - 1e-9, -0.25)
+    E = np.arange(pp.max_standoff, max(pp.min_standoff, pp.standoff - 2.0) - 1e-9, -0.25)
     # Station spacing from the footprint at the closest standoff: overlap never below target.
     S = blade_stations(turbine, pp.spacing(float(E[-1])))
     side_deg = np.array([math.degrees(math.atan2(*SIDE_DIRS[x][::-1])) for x in BLADE_SIDES])
@@ -879,13 +880,20 @@ def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams,
                 flown.append((pos[keep], fwd[keep]))
     if not flown:
         return chunk
-    # The faces in the order and directions with the shortest joins (a join through the
-    # nacelle counts twice its length plus 20 m: it is flown round).
+    # The faces in the order and directions with the shortest joins, a blocked one as long as
+    # the detour ``connect`` finds round the nacelle or the tower top.
     ends = np.array([f[0][x] for f in flown for x in (0, -1)])  # face i: start 2i, end 2i + 1
     E0, E1 = np.repeat(ends, len(ends), axis=0), np.tile(ends, (len(ends), 1))
     L = np.linalg.norm(E1 - E0, axis=1)
     blocked = site.segment_clearance(E0, E1, LEG_STEP, pp.required) < pp.leg_required
-    cost = (L + blocked * (L + 20.0)).reshape(len(ends), len(ends))
+    for j in np.nonzero(blocked)[0]:
+        if j // len(ends) // 2 == j % len(ends) // 2:
+            continue  # a face's own ends: never joined
+        vias = connect(site, E0[j], E1[j], pp.leg_required, ground=pp.min_altitude)
+        chain = np.vstack([E0[j][None]] + [np.asarray(v)[None] for v in vias or []] + [E1[j][None]])
+        L[j] = np.linalg.norm(np.diff(chain, axis=0), axis=1).sum() if vias is not None \
+            else 2 * L[j] + 100.0
+    cost = L.reshape(len(ends), len(ends))
     first = np.zeros(len(ends)) if start_near is None else \
         np.linalg.norm(ends - np.asarray(start_near, float), axis=1)
     part = turbine.part_names().index("nacelle")
