@@ -641,8 +641,9 @@ def _join(wps: list[WP], q: np.ndarray, q_fwd: np.ndarray, turbine: Turbine, k: 
     A, _ = turbine.blade_semi_axes(np.array([1.0]))
     s_end = turbine.tip_radius
     s_arc = max(sp, sq) if abs(sp - sq) < 3 else None
-    if s_arc is None and site.segment_clearance(p[None], q[None], LEG_STEP,
-                                                pp.required)[0] >= pp.leg_required:
+    # Straight where that keeps the clearance (round the tip, a chord is 10 % shorter than the
+    # arc); the arc only where the chord would cut in.
+    if site.segment_clearance(p[None], q[None], LEG_STEP, pp.required)[0] >= pp.leg_required:
         return
 
     def candidates():  # nearest the passes' end first; made only as far as they are checked
@@ -947,6 +948,7 @@ TOWER_PHASES = 6  # column phases tried (fractions of the angle between columns)
 TOWER_MAX_COLUMNS = 16  # mission.tower_columns' own upper bound
 TOWER_GSD_TOLERANCE = 1.05 / 1.02  # pp.reach (the GSD + 2 %) to coverage's own GSD + 5 %
 TOWER_FOOT_DEG = 30.0  # each column's lowest view looks down this far, to the tower's foot
+FOOT_VIA_M = 1.0  # a foot view that ends or starts the tower's flight is reached through a via
 
 
 def tower_columns(radius: float, pp: PassParams) -> int:
@@ -1064,7 +1066,12 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
             target.notes.append(f"{comp}: column {n + 1}: {int((~keep).sum())} station(s) too "
                                 "close to a part: dropped")
         new: list[WP] = []
-        if target.wps and keep.any():  # arc around the tower at constant height to the next column
+        first = pos[keep][0] if keep.any() else None
+        chord_clear = first is not None and target.wps and site.segment_clearance(
+            target.wps[-1].pos[None], first[None], LEG_STEP, pp.required)[0] >= pp.leg_required
+        if target.wps and keep.any() and not chord_clear:
+            # round the tower at constant height to the next column where the straight leg
+            # (a tenth shorter) would cut in
             prev = target.wps[-1].pos
             a0 = math.atan2(prev[1] - turbine.base_xyz[1], prev[0] - turbine.base_xyz[0])
             da = (ang - a0 + math.pi) % (2 * math.pi) - math.pi
@@ -1085,6 +1092,17 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
         new += [WP(p, f, True, comp, standoff=float(d))
                 for p, f, d in zip(pos[keep], fwd[keep], near)]
         append_chain(target, site, pp, new, droppable=True)
+    # A foot view, a few metres from the tower, is passed slowly (its blur limit): where it
+    # ends or starts a chunk (the landing's transit, the launch's) a via a metre out from it
+    # takes that slow leg instead of the column's 7 m leg to its lowest station.
+    for ch, at in ((climb, 0), (chunk, -1)):
+        if ch.wps and ch.wps[at].photo and ch.wps[at].standoff is not None \
+                and ch.wps[at].standoff < pp.standoff - 1.0:
+            w = ch.wps[at]
+            out = np.r_[w.pos[:2] - turbine.base_xyz[:2], 0.0]
+            via = w.pos + _unit(out) * FOOT_VIA_M
+            if _filter_stations(site, pp, via[None])[0]:
+                ch.wps.insert(0 if at == 0 else len(ch.wps), WP(via, None, False, comp))
     return [climb, chunk] if split else [chunk]
 
 
