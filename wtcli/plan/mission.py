@@ -44,9 +44,9 @@ GSD_FILL = 0.9  # nominal standoff = this fraction of the distance that gives th
 MAX_LEG_ROUNDS = 8  # dry runs of the routes at most (each connects the legs the last one named)
 SPLIT_BELOW = 0.985  # a single-pass flat side below this predicted coverage is flown split
 GAP_ROUNDS = 2  # further rounds of gap views for a side still below min_side_coverage
-GAP_SIDE_BELOW = 0.995  # a blade gets extra views when one of its sides is predicted below
+GAP_SIDE_BELOW = 0.995  # extra views for a blade side's misses where it is predicted below
 # this: each is a detour of 10-20 s flown at the blur limit of a view nearer than the passes,
-# so views chasing the last half percent of a side cost a minute of flight per turbine
+# so views chasing the last half percent of every side cost a minute of flight per turbine
 Z = np.array([0.0, 0.0, 1.0])
 
 
@@ -744,9 +744,9 @@ def _chunks(job: tuple) -> list[Chunk]:
         # the tower), within 2 % of the coverage GSD (the measure allows 5 %: the rest is left
         # for the flight's position error); a side still short is flown split.
         reach = mission.camera.distance_for_gsd(1.02 * gsd_eval)
-        before = cov.by_blade_side()
-        wanting = {int(b[5:]) - 1 for b, sides in before.items()
-                   if min(sides.values()) < GAP_SIDE_BELOW}
+        wanting = {int(b[5:]) - 1: {x for x, v in sides.items() if v < GAP_SIDE_BELOW}
+                   for b, sides in cov.by_blade_side().items()}
+        wanting = {k: v for k, v in wanting.items() if v}
         views, covered = gap_plan(t, cov.samples, cov.covered, site, pp, s.max_incidence_deg, reach,
                                   wanting)
         split: dict[int, set[str]] = {}

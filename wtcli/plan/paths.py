@@ -1332,9 +1332,11 @@ def insert_views(chunk: Chunk, views: list[tuple[np.ndarray, np.ndarray, str]], 
 
 def gap_plan(turbine: Turbine, samples: SurfaceSamples, covered: np.ndarray, site: Site,
              pp: PassParams, max_incidence_deg: float, max_distance: float,
-             blades: set[int] | None = None, fine_samples: int = GAP_FINE_SAMPLES
+             blades: set[int] | dict[int, set[str]] | None = None,
+             fine_samples: int = GAP_FINE_SAMPLES
              ) -> tuple[dict[int, list[tuple[np.ndarray, np.ndarray, str]]], np.ndarray]:
-    """``gap_views`` for each blade (all, or those in ``blades``) over its samples that
+    """``gap_views`` for each blade (all, or those in ``blades``; a dict: only its sides named
+    there) over its samples that
     ``covered`` misses (``samples``: the turbine's blade ``SurfaceSamples``); what the grids leave,
     up to ``fine_samples`` samples a blade, is searched one sample at a time. Returns
     {blade index: [(position, viewing direction, component)]} and ``covered`` with what the views
@@ -1342,7 +1344,10 @@ def gap_plan(turbine: Turbine, samples: SurfaceSamples, covered: np.ndarray, sit
     covered = covered.copy()
     out: dict[int, list[tuple[np.ndarray, np.ndarray, str]]] = {}
     for k in range(turbine.n_blades):
-        idx = np.nonzero((samples.blade == k) & ~covered)[0]
+        mine = (samples.blade == k) & ~covered
+        if isinstance(blades, dict) and k in blades:
+            mine &= np.isin(samples.side, [BLADE_SIDES.index(x) for x in blades[k]])
+        idx = np.nonzero(mine)[0]
         if (blades is not None and k not in blades) or len(idx) == 0:
             continue
         out[k] = []
