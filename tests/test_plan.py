@@ -167,9 +167,11 @@ def test_root_trailing_edge_miss_is_the_root_patch():
     missed = cov.samples[~cov.covered]
     assert len(missed) >= 1
     assert (missed.span < 0.07).all()  # at the root: the trailing edge, and slivers where
-    assert missed.area[missed.side != 2].sum() < 0.01  # the other sides enter the hub
+    # the other sides enter the hub, which get no extra views once a side is predicted
+    # above 99.5 % (mission.GAP_SIDE_BELOW)
     for b, sides in cov.by_blade_side().items():
         assert sides["trailing_edge"] >= 0.96, (b, sides)
+        assert min(v for k, v in sides.items() if k != "trailing_edge") > 0.995, (b, sides)
 
 
 @pytest.mark.slow
