@@ -463,7 +463,7 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
         S = S[:0]
     no_return = ring is not None and len(passes) % 2 == 0 and start_near is not None
     if no_return:
-        passes = _ring_order(passes, start_near, end_toward)
+        passes = _ring_order(passes, start_near, end_toward, site, pp)
     extra = [0.0] + [e for e in (0.5, 1.0, 1.5) if pp.standoff + e <= pp.max_standoff]
     closer = [e for e in (-0.5, -1.0) if pp.standoff + e >= pp.min_standoff]
     for side in BLADE_SIDES if len(S) >= 2 else ():
@@ -573,21 +573,43 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
     return chunk
 
 
-def _ring_order(passes: list, start_near: np.ndarray, end_toward: np.ndarray | None) -> list:
+def _ring_order(passes: list, start_near: np.ndarray, end_toward: np.ndarray | None,
+                site: Site, pp: PassParams) -> list:
     """An even ring's passes (in ring order, each root -> tip) rotated and maybe reversed so that
-    the first pass's root end is near ``start_near`` and the last's root end (where the ring
-    ends: out and back in turn) near ``end_toward``: the shortest sum of the two, straight."""
+    the way in (from ``start_near`` to the first pass's root end), the joins between passes
+    (root and tip ends of neighbours, as the order pairs them) and the way out (from the last
+    pass's root end, where the ring ends, to ``end_toward``: straight, a point on the next part
+    and not one to fly to) are shortest: the others straight where that keeps the clearance,
+    else as long as ``connect``'s detour (a root crowded by the hub, the nacelle or the tower
+    joins badly on one side)."""
     n = len(passes)
+    if not all(len(p[1]) for p in passes):
+        return passes
+    cache: dict[tuple, float] = {}
+
+    def way(p: np.ndarray, q: np.ndarray) -> float:
+        key = (p.tobytes(), q.tobytes())
+        if key not in cache:
+            L = float(np.linalg.norm(q - p))
+            if site.segment_clearance(p[None], q[None], LEG_STEP, pp.required)[0] \
+                    < pp.leg_required:
+                vias = connect(site, p, q, pp.leg_required, ground=pp.min_altitude)
+                chain = [p] + list(vias or []) + [q]
+                L = float(np.linalg.norm(np.diff(np.array(chain), axis=0), axis=1).sum()) \
+                    if vias is not None else 3 * L + 200.0
+            cache[key] = L
+        return cache[key]
+
     best, out = math.inf, passes
     for i0 in range(n):
         for step in (1, -1):
             order = [passes[(i0 + step * j) % n] for j in range(n)]
-            flown = [p for p in order if len(p[1])]
-            if not flown:
-                return passes
-            cost = float(np.linalg.norm(flown[0][1][0] - start_near))
+            cost = way(start_near, order[0][1][0])
+            for j in range(n - 1):  # even j ends out at its tip, odd j back at its root
+                end = -1 if j % 2 == 0 else 0
+                cost += way(order[j][1][end], order[j + 1][1][end])
             if end_toward is not None:
-                cost += float(np.linalg.norm(flown[-1][1][0] - end_toward))
+                cost += float(np.linalg.norm(order[-1][1][0] - end_toward))
             if cost < best - 1e-9:
                 best, out = cost, order
     return out
