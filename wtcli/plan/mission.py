@@ -794,7 +794,8 @@ def _chunks(job: tuple) -> list[Chunk]:
                 break
             add_gap_views(chunks, more, site, pp)
         for _ in range(NACELLE_GAP_ROUNDS):
-            _nacelle_gap_views(t, chunks, mission, site, pp, gsd_eval, reach)
+            if not _nacelle_gap_views(t, chunks, mission, site, pp, gsd_eval, reach):
+                break
     return chunks
 
 
@@ -806,29 +807,30 @@ NACELLE_GAP_BELOW = 0.98  # predicted nacelle coverage under which the extra vie
 
 
 def _nacelle_gap_views(t: Turbine, chunks: list[Chunk], mission: Mission, site, pp: PassParams,
-                       gsd_eval: float, reach: float) -> None:
+                       gsd_eval: float, reach: float) -> bool:
     """Extra views (``gap_views``, as for the blades) of the nacelle surface that no photo of the
-    turbine's chunks covers, flown within the nacelle's own chunk."""
+    turbine's chunks covers, flown within the nacelle's own chunk. Whether any were added."""
     nac = next((c for c in chunks if c.name == "nacelle" and c.wps), None)
     if nac is None:
-        return
+        return False
     s = mission.settings
     cov = _coverage_from_chunks(t, chunks, mission.camera, gsd_eval, s.coverage_spacing_m,
                                 s.max_incidence_deg, "structure")
     smp = cov.samples
     nac_part = smp.part == t.part_names().index("nacelle")
     if cov.fraction(nac_part) >= NACELLE_GAP_BELOW:
-        return
+        return False
     miss = np.nonzero(nac_part & ~cov.covered)[0]
     if not len(miss):
-        return
+        return False
     views = gap_views(t, smp.points[miss], smp.normals[miss], smp.area[miss], site, pp,
                       s.max_incidence_deg, reach, NACELLE_GAP_VIEWS)
     if not views:
-        return
+        return False
     lost = insert_views(nac, [(p, f, f"{t.id}/nacelle") for p, f, _ in views], site, pp)
     nac.notes.append(f"{t.id}/nacelle: {len(views) - lost} extra view(s) of surface its rows miss"
                      + (f"; {lost} no safe path reaches: dropped" if lost else ""))
+    return len(views) > lost
 
 
 def _photos_of(t: Turbine, routes: list[Route]) -> tuple[np.ndarray, np.ndarray]:

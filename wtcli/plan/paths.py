@@ -367,12 +367,15 @@ def _ring_standoffs(turbine: Turbine, k: int, pp: PassParams, S: np.ndarray, ang
     reach = pp.reach if pp.reach > 0 else pp.max_standoff
     limit = pp.max_incidence_deg - RING_MARGIN_DEG
     e_best = np.full(len(S), np.nan)
+    # a view's direction does not depend on its standoff: its rotation is made once per angle
+    rot = {g: _camera_rotations(_side_points(turbine, k, S, np.full(len(S), g),
+                                             np.zeros(len(S)))[1])
+           for g in np.radians(angles_deg)}
     for e in np.sort(E):  # closest first; a farther standoff that also works replaces it
         seen = np.zeros(P.shape[:2], bool)
         for g in np.radians(angles_deg):
-            pos, fwd = _side_points(turbine, k, S, np.full(len(S), g), np.full(len(S), e))
-            R = _camera_rotations(fwd)
-            seen |= imaged(P - pos[:, None, :], N, R[:, None], pp.camera, reach, limit, 0.05)
+            pos, _ = _side_points(turbine, k, S, np.full(len(S), g), np.full(len(S), e))
+            seen |= imaged(P - pos[:, None, :], N, rot[g][:, None], pp.camera, reach, limit, 0.05)
         ok = (seg * ~seen).sum(axis=1) <= 1e-3 * seg.sum(axis=1)
         e_best[ok] = e
     return e_best
@@ -903,15 +906,19 @@ def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams,
                 flown.append((pos[keep], fwd[keep]))
     if not flown:
         return chunk
-    # The faces in the order and directions with the shortest joins, a blocked one as long as
-    # the detour ``connect`` finds round the nacelle or the tower top.
+    # The faces in the order and directions with the shortest joins.
     ends = np.array([f[0][x] for f in flown for x in (0, -1)])  # face i: start 2i, end 2i + 1
     E0, E1 = np.repeat(ends, len(ends), axis=0), np.tile(ends, (len(ends), 1))
     L = np.linalg.norm(E1 - E0, axis=1)
     blocked = site.segment_clearance(E0, E1, LEG_STEP, pp.required) < pp.leg_required
+    below = (ends[:, 2] < ctr[2] - half[2])[:, None] & (ends[:, 2] < ctr[2] - half[2])[None, :]
+    below = below.ravel()
     for j in np.nonzero(blocked)[0]:
-        if j // len(ends) // 2 == j % len(ends) // 2:
-            continue  # a face's own ends: never joined
+        if not below[j] or j // len(ends) // 2 == j % len(ends) // 2:
+            # round the nacelle, counted as twice the straight length plus 20 m; only a join
+            # under it (the underside's rows, either side of the tower top) is worked out
+            L[j] = 2 * L[j] + 20.0
+            continue
         vias = connect(site, E0[j], E1[j], pp.leg_required, ground=pp.min_altitude)
         chain = np.vstack([E0[j][None]] + [np.asarray(v)[None] for v in vias or []] + [E1[j][None]])
         L[j] = np.linalg.norm(np.diff(chain, axis=0), axis=1).sum() if vias is not None \
