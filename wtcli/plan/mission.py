@@ -603,7 +603,7 @@ BUDGET_KEYS = ("capture_s", "turns_s", "hover_s", "transit_s", "climbs_s", "batt
 
 
 def _time_budget(wps: list[WP], dt: np.ndarray, wait: np.ndarray, swap: np.ndarray,
-                 turbines: list[str], sp: Speeds | None = None) -> dict[str, dict[str, float]]:
+                 turbines: list[str], sp: Speeds) -> dict[str, dict[str, float]]:
     """Each leg's time, by turbine and kind: ``capture_s`` along a pass between two photos
     (slowed to the photo interval where it binds), ``turns_s`` the other inspection-speed legs
     (arcs round a blade, joins between passes even from photo to photo, the blade's return leg,
@@ -643,8 +643,7 @@ def _time_budget(wps: list[WP], dt: np.ndarray, wait: np.ndarray, swap: np.ndarr
         elif not z.slow:
             b["transit_s"] += float(dt[i])
             b["hover_s"] += float(wait[i])
-        elif a.photo and z.photo and (sp is None or sp.is_pass_leg(
-                float(np.linalg.norm(z.pos - a.pos)))):
+        elif a.photo and z.photo and sp.is_pass_leg(float(np.linalg.norm(z.pos - a.pos))):
             b["capture_s"] += float(dt[i] + wait[i])
         else:
             b["turns_s"] += float(dt[i])
