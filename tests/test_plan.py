@@ -766,6 +766,32 @@ def _hilly_site():
                  for i in range(3))
 
 
+def test_a_point_tucked_under_the_nacelle_is_connected_along_a_direction_no_escape_names(
+        monkeypatch):
+    """The top of a tower column (16 mm lens, 5 m out) between the tower, the nacelle and a
+    blade root, 4.0 m from the nearest part, and S_p 69 m in front of the hub: none of the
+    escape directions (radial, away from the tower, the axis, the blades, up) leads out, one
+    of the lattice's does; the plan of this turbine was refused for it."""
+    from wtcli.plan import paths
+    from wtcli.plan.clearance import Site
+
+    t = Turbine.with_rotor_azimuth(63.40235471669334, id="T1", base=(0, 0, 0),
+                                   hub_height=116.74420547730556,
+                                   rotor_diameter=137.36167373937914, yaw_deg=112.63757669885429)
+    site = Site([t], launch=np.array([77.2, -32.2, 0.0]), uncertainty=[0.5])
+    p = np.array([6.175115552527011, 3.1957396014914816, 108.77573044296336])
+    q = np.array([73.84879860405789, -30.79712828863798, 116.74420547730556])
+    vias = paths.connect(site, p, q, 3.75, ground=5.0)
+    assert vias, vias
+    chain = np.array([p, *vias, q])
+    for a, b in zip(chain[:-1], chain[1:]):  # every 5 cm, against the site's own distance
+        X = a + (b - a) * np.linspace(0, 1, int(np.linalg.norm(b - a) / 0.05) + 2)[:, None]
+        assert site.clearance(X).min() >= 3.75 - 0.05, (a, b)
+        assert X[:, 2].min() >= 5.0
+    monkeypatch.setattr(paths, "LATTICE", [])
+    assert paths.connect(site, p, q, 3.75, ground=5.0) is None
+
+
 def test_legs_above_ground_sees_a_leg_cross_higher_ground():
     from wtcli.plan.clearance import Site
 

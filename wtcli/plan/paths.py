@@ -127,7 +127,10 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
     where a long leg is blocked), from p or from q, then two via points pushed from p and q
     (also held at the height of the higher end or ground between uneven grounds), along the
     hint and escape directions by growing distances (a distance's candidates checked together,
-    shortest chain first; the first that clears wins). None if none does.
+    shortest chain first; the first that clears wins); where none does, the same along the 26
+    directions of a cube's faces, edges and corners (``LATTICE``): a point tucked between the
+    nacelle, the tower and a blade root may have its way out along none of the escapes. None if
+    nothing clears.
     """
     p, q = np.asarray(p, float), np.asarray(q, float)
     cap = leg_required + 0.5 * LEG_STEP  # legs subtract up to half a step of sampling slack
@@ -162,14 +165,37 @@ def connect(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float,
 
     def lift(v: np.ndarray) -> np.ndarray:
         return np.r_[v[:2], max(v[2], zc)]
+    up = lift if lifted else None
+    more = [u for u in LATTICE if all(float(u @ v) < 0.999 for v in dirs)]
+    return (_search(site, p, q, leg_required, ground, dirs, m, gp, gq, block, up)
+            or _search(site, p, q, leg_required, ground, more, m, gp, gq, [], up, with_away=False))
+
+
+# The 26 directions from a cube's centre to its faces, edges and corners: where none of a
+# leg's escape directions leads round what blocks it, one of these does, if a short one does.
+LATTICE = [np.array(d, float) / np.linalg.norm(d)
+           for d in itertools.product((-1.0, 0.0, 1.0), repeat=3) if any(d)]
+
+
+def _search(site: Site, p: np.ndarray, q: np.ndarray, leg_required: float, ground: float | None,
+            dirs: list[np.ndarray], m: np.ndarray, gp: np.ndarray, gq: np.ndarray,
+            block: list, lift, with_away: bool = True) -> list[np.ndarray] | None:
+    """``connect``'s candidates along ``dirs`` by growing distances: one via from the middle,
+    from p or from q, two from p and q (``lift``-ed too where given), from p and q straight
+    away from the nearest part (``gp``, ``gq``; with ``with_away``) with one from the middle
+    between, and from where a long leg is blocked (``block``)."""
+    cap = leg_required + 0.5 * LEG_STEP
     for dist in (2.0, 4.0, 7.0, 11.0, 16.0, 24.0, 35.0, 50.0, 70.0, 95.0):  # nearest first
         cands = [[m + dist * u] for u in dirs] + [[p + dist * u] for u in dirs] + \
             [[q + dist * u] for u in dirs] + [[p + dist * u, q + dist * u] for u in dirs]
-        cands += [[p + dist * gp, q + dist * gq]]
+        if with_away:
+            cands += [[p + dist * gp, q + dist * gq]]
         cands += [[p + dist * gp, m + dist * u, q + dist * gq] for u in dirs]
         cands += [[xb + dist * u] for xb, ub in block for u in ub]
-        if lifted:
+        if lift:
             cands += [[lift(p + dist * u), lift(q + dist * u)] for u in dirs]
+        if not cands:
+            return None  # none along any direction, at any distance
         vp = np.array([v for c in cands for v in c])
         vo = np.repeat(np.arange(len(cands)), [len(c) for c in cands])
         if ground is not None:  # height above the local ground (nearest base or launch point)
