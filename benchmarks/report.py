@@ -231,13 +231,15 @@ SECTIONS: tuple[Section, ...] = (
         adopt='save("plan_latency", figures)'),
     Section(
         "Flight time per turbine", "flight_time",
-        "python benchmarks/flight_time.py --cases 10",
+        "python benchmarks/flight_time.py",
         "Planned minutes of flight per turbine (photos while moving at the camera's interval and "
-        "blur limits, legs timed as an autopilot flies them) on 10 random single turbines (hub "
-        "40-120 m, rotor 80-170 m) with the default camera (Zenmuse P1, 35 mm), where the minutes go, the predicted coverage beside them, and "
-        "the manual pilot's time for the same photos.",
-        (F("mean / worst minutes per turbine", ("random.minutes_mean", "random.minutes_max"),
-           "{:.1f} / {:.1f} min", "mean ≤ 10 min"),
+        "blur limits, legs timed as an autopilot flies them) on 100 random single turbines (hub "
+        "40-120 m, rotor 80-170 m) with the default camera (Zenmuse P1, 35 mm), where the "
+        "minutes go, the predicted coverage beside them, and the manual pilot's time for the "
+        "same photos. The mean is a sample's: its standard error is beside it.",
+        (F("mean ± standard error / worst minutes per turbine",
+           ("random.minutes_mean", "random.minutes_se", "random.minutes_max"),
+           "{:.2f} ± {:.2f} / {:.1f} min", "mean ≤ 10 min"),
          F("mean minutes: capture / turns / transit / battery swaps / climbs",
            tuple(f"random.budget_min_mean.{k}" for k in
                  ("capture", "turns", "transit", "battery_swaps", "climbs")),

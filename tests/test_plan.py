@@ -1395,6 +1395,26 @@ def test_tower_columns_see_the_girth_and_one_fewer_does_not(cam, want):
         assert seen(n, 0.0, e + 1.0) < 0.999  # (beyond the planning margins) it is not seen
 
 
+@pytest.mark.parametrize("cam", [P1_35, CAM])
+@pytest.mark.parametrize("hub, rotor", [(60, 80), (98, 150), (120, 170)])
+def test_tower_columns_fly_less_than_a_helix_at_the_same_standoff(cam, hub, rotor):
+    """Columns or a helix, by time (both are flown at the same blur limit, so by length): a
+    helix round the tower at the columns' standoff climbs by one footprint height less the
+    rows' overlap per turn; the columns climb the tower once each. Over the turbines' range,
+    with either camera, the helix is at least twice as long."""
+    from wtcli.plan.mission import pass_params
+    from wtcli.plan.paths import FACE_ROW_LAP, tower_columns, tower_standoff
+    t = make_turbine(hub_height=hub, rotor_diameter=rotor)
+    pp, _, _ = pass_params(Mission((t,), cam, settings=Settings()))
+    r = t.tower_base_radius
+    n = tower_columns(r, pp)
+    e = tower_standoff(r, pp, n)
+    height = t.hub_height - pp.min_altitude
+    columns = n * height
+    helix = height / ((1 - FACE_ROW_LAP) * cam.footprint_m(e)[1]) * 2 * np.pi * (r + e)
+    assert helix > 2 * columns, (n, e, columns, helix)
+
+
 @pytest.mark.parametrize("cam, columns", [(P1_35, 4), (CAM, 5)])
 def test_an_even_tower_is_climbed_on_the_way_up_and_ends_at_the_bottom(cam, columns):
     """Four columns flown from the top would end at the top, a descent without photos before
