@@ -1395,6 +1395,41 @@ def test_tower_columns_see_the_girth_and_one_fewer_does_not(cam, want):
         assert seen(n, 0.0, e + 1.0) < 0.999  # (beyond the planning margins) it is not seen
 
 
+@pytest.mark.parametrize("horizontal", [False, True])
+def test_a_face_a_little_taller_than_the_frame_is_tiled_with_fewer_photos_and_all_seen(horizontal):
+    """A nacelle face a few decimetres taller than the frame's usable height, flown in rows
+    along it, takes two rows 1.2 m apart; in columns (a side) or with the frame turned (the
+    top), fewer photos see all of it, by coverage's own test. (The top's view is tipped 1 deg
+    to fix the camera's yaw: its stations are set back along it, or the frame's far edge
+    moves 0.2 m off the face.)"""
+    from wtcli.plan.mission import pass_params
+    from wtcli.plan.paths import FACE_BORDER, _camera_rotations, _face_rows, _face_tiling
+    t = make_turbine(hub_height=98, rotor_diameter=150)
+    pp, gsd, _ = pass_params(Mission((t,), P1_35, settings=Settings()))
+    fw, fh = P1_35.footprint_m(pp.standoff)
+    hu, hv = 8.3, 0.5 * (1 - FACE_BORDER) * fh + 0.4  # 16.6 m long, 0.8 m taller than a row sees
+    c = np.array([0.0, 0.0, 100.0])
+    if horizontal:  # the top face: rows along x, the view tipped towards y (frame along x)
+        nrm, u, v, tilt = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]), \
+            np.array([0, 1.0, 0])
+    else:  # a side: rows along x, across z
+        nrm, u, v, tilt = np.array([0, 1.0, 0]), np.array([1.0, 0, 0]), np.array([0, 0, 1.0]), None
+    rows = _face_rows(c, nrm, u, v, hu, hv, pp, tilt)
+    tiled = _face_tiling(c, nrm, u, v, hu, hv, pp, tilt)
+    n_rows, n_tiled = (sum(len(r[0]) for r in x) for x in (rows, tiled))
+    assert len(rows) == 2 and n_tiled < n_rows, (n_rows, n_tiled)
+    # every point of the face, 10 cm apart, in some photo: frame less 2 %, the GSD's distance,
+    # incidence within 60 deg (the coverage measure's test, line of sight aside: a flat face)
+    a, b = np.meshgrid(np.linspace(-hu, hu, 171), np.linspace(-hv, hv, 1 + int(20 * hv)))
+    X = c + a.reshape(-1, 1) * u + b.reshape(-1, 1) * v
+    pos = np.vstack([r[0] for r in tiled])
+    rot = _camera_rotations(np.vstack([r[1] for r in tiled]))  # as the route records them
+    from wtcli.geometry.coverage import imaged
+    seen = imaged(X[:, None] - pos[None], np.broadcast_to(nrm, (len(X), 1, 3)), rot[None],
+                  P1_35, P1_35.distance_for_gsd(1.05 * gsd), 60.0, 0.02).any(axis=1)
+    assert seen.all(), (~seen).sum()
+
+
 @pytest.mark.parametrize("cam", [P1_35, CAM])
 @pytest.mark.parametrize("hub, rotor", [(60, 80), (98, 150), (120, 170)])
 def test_tower_columns_fly_less_than_a_helix_at_the_same_standoff(cam, hub, rotor):
@@ -1444,6 +1479,29 @@ def test_an_even_tower_is_climbed_on_the_way_up_and_ends_at_the_bottom(cam, colu
     assert r.pos[rest[-1], 2] < 8.0  # the last column ends at the bottom
     assert set(comp[rest[-1] + 1:]) <= {"T1/tower", "return"}  # then home
     assert_safe(plan, 3.0)
+
+
+@pytest.mark.parametrize("cam", [P1_35, CAM])
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_the_tower_ends_by_the_landing(cam, side):
+    """The columns after the climb go round the tower the way whose last column ends on the
+    landing's side: with the landing off to either side of the climbing column, the last
+    station flips with it, and the way home from it is straight."""
+    from wtcli.plan.clearance import Site
+    from wtcli.plan.mission import pass_params
+    from wtcli.plan.paths import LEG_STEP, tower_chunk
+    t = make_turbine(az=90.0, hub_height=98, rotor_diameter=150)  # no blade down the tower
+    pp, _, _ = pass_params(Mission((t,), cam, settings=Settings()))
+    site = Site([t])
+    front = t.base_xyz + 80.0 * t.axis + [0, 0, 98.0]
+    across = np.cross([0.0, 0.0, 1.0], t.axis)
+    land = t.base_xyz + 90.0 * side * across + [0, 0, 10.0]
+    chunks = tower_chunk(t, site, pp, start_near=t.nacelle_center + [0, 0, 15.0],
+                         climb_toward=front, end_toward=land)
+    last = chunks[-1].wps[-1].pos
+    assert (last - t.base_xyz)[:2] @ (land - t.base_xyz)[:2] > 0, (last, land)
+    assert site.segment_clearance(last[None], land[None], LEG_STEP, pp.required)[0] \
+        >= pp.leg_required
 
 
 def test_tower_columns_stay_within_what_the_yaml_allows_for_a_narrow_camera():

@@ -184,6 +184,13 @@ def default_launch(t: Turbine) -> np.ndarray:
     return np.array([p[0], p[1], t.base_xyz[2]])
 
 
+def launch_point(mission: Mission) -> np.ndarray:
+    """``fleet.launch``, else the automatic one in front of the first turbine."""
+    fl = mission.fleet
+    return np.array(fl.launch, float) if fl.launch is not None else \
+        default_launch(mission.turbines[0])
+
+
 # ---- per-turbine chunks ------------------------------------------------------------------------------
 def blade_order(t: Turbine) -> list[int]:
     """Clockwise as seen from the front, starting with the blade nearest straight up."""
@@ -236,8 +243,10 @@ def turbine_chunks(t: Turbine, site: Site, pp: PassParams, mission: Mission,
         if mission.settings.inspect_tower:
             # the overview photo always has a station, so some chunk before the tower has one
             last = next(c for c in reversed(chunks) if c.wps)
+            # ends by the landing: the way out to where the route climbs down to the launch
+            land = launch_point(mission) + Z * mission.settings.takeoff_altitude_m
             *climb, tower = tower_chunk(t, site, pp, mission.settings.tower_columns,
-                                        start_near=last.end, climb_toward=sp)
+                                        start_near=last.end, climb_toward=sp, end_toward=land)
             chunks[:0] = climb  # a column flown up on the way to the overview, if any
             chunks.append(tower)
             if not any(w.photo for c in climb + [tower] for w in c.wps):
@@ -919,7 +928,7 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
     s, fl = mission.settings, mission.fleet
     real = list(mission.turbines)
     assumed = real if pattern == "adaptive" else [y_turbine(t) for t in real]
-    launch = np.array(fl.launch, float) if fl.launch is not None else default_launch(real[0])
+    launch = launch_point(mission)
     site_plan = Site(assumed, launch=launch, uncertainty=mission.geometry_uncertainties())
     site_real = Site(real, launch=launch, uncertainty=mission.geometry_uncertainties())
     lc = float(site_real.clearance(launch[None])[0])

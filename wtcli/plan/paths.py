@@ -602,6 +602,19 @@ def blade_chunk(turbine: Turbine, k: int, site: Site, pp: PassParams, label: str
     return chunk
 
 
+def _way_length(site: Site, pp: PassParams, p: np.ndarray, q: np.ndarray) -> float:
+    """The length of a leg p -> q as it will be flown: straight where that keeps the clearance,
+    else along ``connect``'s detour (three times the straight length plus 200 m where it finds
+    none)."""
+    L = float(np.linalg.norm(q - p))
+    if site.segment_clearance(p[None], q[None], LEG_STEP, pp.required)[0] < pp.leg_required:
+        vias = connect(site, p, q, pp.leg_required, ground=pp.min_altitude)
+        chain = [p] + list(vias or []) + [q]
+        L = float(np.linalg.norm(np.diff(np.array(chain), axis=0), axis=1).sum()) \
+            if vias is not None else 3 * L + 200.0
+    return L
+
+
 def _ring_order(passes: list, start_near: np.ndarray, end_toward: np.ndarray | None,
                 site: Site, pp: PassParams) -> list:
     """An even ring's passes (in ring order, each root -> tip) rotated and maybe reversed so that
@@ -619,14 +632,7 @@ def _ring_order(passes: list, start_near: np.ndarray, end_toward: np.ndarray | N
     def way(p: np.ndarray, q: np.ndarray) -> float:
         key = (p.tobytes(), q.tobytes())
         if key not in cache:
-            L = float(np.linalg.norm(q - p))
-            if site.segment_clearance(p[None], q[None], LEG_STEP, pp.required)[0] \
-                    < pp.leg_required:
-                vias = connect(site, p, q, pp.leg_required, ground=pp.min_altitude)
-                chain = [p] + list(vias or []) + [q]
-                L = float(np.linalg.norm(np.diff(np.array(chain), axis=0), axis=1).sum()) \
-                    if vias is not None else 3 * L + 200.0
-            cache[key] = L
+            cache[key] = _way_length(site, pp, p, q)
         return cache[key]
 
     best, out = math.inf, passes
@@ -825,12 +831,31 @@ def _face_rows(center: np.ndarray, normal: np.ndarray, u: np.ndarray, v: np.ndar
                                                         / ((1 - pp.overlap) * along))) + 1
     vs = np.linspace(-1, 1, n_v) * max(half_v - use_c / 2, 0.0)
     us = np.linspace(-1, 1, n_u) * max(half_u - use_a / 2, 0.0)
+    # each station looks at its own point of the face from the standoff (along the normal):
+    # set back along the tipped view so its frame is not moved 0.02 x standoff aside
+    back = pp.standoff / float(-(fwd @ normal)) * fwd
     rows = []
     for i, dv in enumerate(vs):
         uu = us if i % 2 == 0 else us[::-1]
-        pos = center + pp.standoff * normal + dv * v + uu[:, None] * u
+        pos = center + dv * v + uu[:, None] * u - back
         rows.append((pos, np.tile(fwd, (len(uu), 1))))
     return rows
+
+
+def _face_tiling(center: np.ndarray, normal: np.ndarray, u: np.ndarray, v: np.ndarray,
+                 half_u: float, half_v: float, pp: PassParams,
+                 tilt: np.ndarray | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``_face_rows`` in the layout that needs the fewest photos, then the shortest path: rows
+    along u or along v and, on a horizontal face (``tilt`` given), the frame's longer side along
+    either (the camera's yaw). A face a little taller than the frame flown in rows along it
+    takes two rows a few decimetres apart; in columns, or with the frame turned, one."""
+    options = []
+    for a, b, ha, hb in ((u, v, half_u, half_v), (v, u, half_v, half_u)):
+        for t in ([None] if tilt is None else [tilt, u]):
+            rows = _face_rows(center, normal, a, b, ha, hb, pp, t)
+            P = np.vstack([r[0] for r in rows])
+            options.append((len(P), float(np.linalg.norm(np.diff(P, axis=0), axis=1).sum()), rows))
+    return min(options, key=lambda o: o[:2])[2]
 
 
 def _face_turn(site: Site, pp: PassParams, pos: np.ndarray, fwd: np.ndarray,
@@ -912,7 +937,7 @@ def nacelle_chunk(turbine: Turbine, site: Site, pp: PassParams,
         # the underside's two oblique rows are flown as two units (the tower top between them)
         units = _underside_rows(site, pp, c, u, v, hu, hv) if under else []
         if not units:
-            rows = _face_rows(c, nrm, u, v, hu, hv, pp, tilt)
+            rows = _face_tiling(c, nrm, u, v, hu, hv, pp, tilt)
             units = [(np.vstack([r[0] for r in rows]), np.vstack([r[1] for r in rows]))]
         for pos, fwd in units:
             pos = _back_off(site, pp, pos, fwd)
@@ -1043,14 +1068,17 @@ def tower_standoff(radius: float, pp: PassParams, columns: int) -> float:
 
 def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
                 start_near: np.ndarray | None = None,
-                climb_toward: np.ndarray | None = None) -> list[Chunk]:
+                climb_toward: np.ndarray | None = None,
+                end_toward: np.ndarray | None = None) -> list[Chunk]:
     """The tower in vertical columns of photos, flown top -> bottom, bottom -> top in turn from
     the column nearest ``start_near``, joined by level arcs round the tower.
 
     One chunk, or with ``climb_toward`` and an even number of columns (which, flown from the
     top, would end at the top) two: the column nearest that point flown bottom -> top, the climb
-    to the rotor made a photo pass, and the others from the column next to it nearer
-    ``start_near``, top -> bottom first, so the last one ends at the bottom, by the landing."""
+    to the rotor made a photo pass, and the others from a column next to it, top -> bottom
+    first, so the last one ends at the bottom, by the landing. Round the tower either way: the
+    one whose way in from ``start_near`` and way out to ``end_toward`` (the landing) are
+    shortest as flown (a way out behind the tower is a detour round it)."""
     rb, H = turbine.tower_base_radius, turbine.tower_height
     if columns <= 0:
         columns = tower_columns(rb, pp)
@@ -1101,14 +1129,31 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
     else:
         yaw0 = phases[0]
     comp = f"{turbine.id}/tower"
-    order = list(range(columns))
-    if split:  # the rest round the tower from the climbing column's neighbour nearer start_near
-        def dist(j: int) -> float:  # from column j's top station
-            top = column(yaw0 + 2 * math.pi * j / columns)[0][0]
-            return float(np.linalg.norm(top[:2] - np.asarray(start_near, float)[:2])) \
-                if start_near is not None else 0.0
-        step = 1 if dist(1) <= dist(columns - 1) else -1
-        order = [0] + [(step * k) % columns for k in range(1, columns)]
+
+    def flown(step: int) -> list[int]:  # the climbing column first, if any, then round the tower
+        return [0] + [(step * k) % columns for k in range(1, columns)] if split else \
+            [(step * k) % columns for k in range(columns)]
+
+    def ends(order: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        """The first station after the climb and the last, as ``order`` flies them."""
+        out = []
+        for n in ((1 if split else 0), len(order) - 1):
+            pos = column(yaw0 + 2 * math.pi * order[n] / columns)[0]
+            out.append(pos[::-1] if n % 2 == (0 if split else 1) else pos)
+        return out[0][0], out[1][-1]
+
+    def cost(order: list[int]) -> float:
+        first, last = ends(order)
+        c = 0.0
+        if start_near is not None:
+            c += _way_length(site, pp, np.asarray(start_near, float), first)
+        if end_toward is not None:
+            c += _way_length(site, pp, last, np.asarray(end_toward, float))
+        return c
+
+    order = flown(1)
+    if columns > 2 and (start_near is not None or end_toward is not None):
+        order = min((flown(1), flown(-1)), key=cost)
     climb, chunk = Chunk(turbine.id, "tower"), Chunk(turbine.id, "tower")
     for n, j in enumerate(order):
         target = climb if split and n == 0 else chunk
