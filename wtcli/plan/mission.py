@@ -243,8 +243,10 @@ def turbine_chunks(t: Turbine, site: Site, pp: PassParams, mission: Mission,
         if mission.settings.inspect_tower:
             # the overview photo always has a station, so some chunk before the tower has one
             last = next(c for c in reversed(chunks) if c.wps)
-            # ends by the landing: the way out to where the route climbs down to the launch
-            land = launch_point(mission) + Z * mission.settings.takeoff_altitude_m
+            # A lone turbine's tower is the last thing before the landing: it ends on the
+            # launch's side. On a site of several, what follows it is decided with the routes.
+            land = launch_point(mission) + Z * mission.settings.takeoff_altitude_m \
+                if len(mission.turbines) == 1 else None
             *climb, tower = tower_chunk(t, site, pp, mission.settings.tower_columns,
                                         start_near=last.end, climb_toward=sp, end_toward=land)
             chunks[:0] = climb  # a column flown up on the way to the overview, if any
