@@ -1142,18 +1142,20 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
             out.append(pos[::-1] if n % 2 == (0 if split else 1) else pos)
         return out[0][0], out[1][-1]
 
-    def cost(order: list[int]) -> float:
-        first, last = ends(order)
-        c = 0.0
-        if start_near is not None:
-            c += _way_length(site, pp, np.asarray(start_near, float), first)
-        if end_toward is not None:
-            c += _way_length(site, pp, last, np.asarray(end_toward, float))
-        return c
-
     order = flown(1)
-    if columns > 2 and (start_near is not None or end_toward is not None):
-        order = min((flown(1), flown(-1)), key=cost)
+    if columns > 2:
+        # the two directions' ways in and home; an end they share costs both the same
+        (f0, l0), (f1, l1) = ends(flown(1)), ends(flown(-1))
+        c = [0.0, 0.0]
+        for p, q, at in ((start_near, (f0, f1), 0), (end_toward, (l0, l1), 1)):
+            if p is None or np.allclose(q[0], q[1]):
+                continue
+            p = np.asarray(p, float)
+            for k in (0, 1):
+                c[k] += _way_length(site, pp, p, q[k]) if at == 0 else \
+                    _way_length(site, pp, q[k], p)
+        if c[1] < c[0] - 1e-9:
+            order = flown(-1)
     climb, chunk = Chunk(turbine.id, "tower"), Chunk(turbine.id, "tower")
     for n, j in enumerate(order):
         target = climb if split and n == 0 else chunk
