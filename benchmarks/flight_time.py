@@ -28,7 +28,8 @@ of the minutes over the root of the number of cases; about 1.5 min / sqrt(cases)
 with 100 cases and 0.47 with 10), and another draw of as many turbines lands within about two
 of those of it.
 
-Done when (issue #46): mean <= 10 min per random turbine, every blade side >= 98 %, tower and
+Done when (issue #46): mean <= 10 min per random turbine (here: the mean's upper 95 % bound,
+mean + 1.96 standard errors), every blade side >= 98 %, tower and
 nacelle >= 95 %, no violation. ``--inspection-speed`` overrides ``fleet.inspection_speed_m_s``
 (the cap; the camera's photo interval and motion-blur limit still apply).
 """
@@ -182,7 +183,11 @@ def random_turbines(cases: int, seed: int, speed: float | None, spacing: float,
                          "min_blade_side": r["turbines"][0]["min_blade_side"],
                          "tower": r["turbines"][0]["tower"], "nacelle": r["turbines"][0]["nacelle"]}
                         for r in rows]}
-    agg["done"] = bool(rows and not refused and agg["minutes_mean"] <= TARGET_MIN
+    # the mean's target held with 95 % confidence (its upper bound), not by one draw's luck
+    agg["minutes_mean_upper95"] = (agg["minutes_mean"] + 1.96 * agg["minutes_se"]
+                                   if agg["minutes_se"] is not None else None)
+    agg["done"] = bool(rows and not refused and agg["minutes_mean_upper95"] is not None
+                       and agg["minutes_mean_upper95"] <= TARGET_MIN
                        and sides.min() >= SIDE_MIN and min(tower.min(), nac.min()) >= STRUCTURE_MIN
                        and viol == 0)
     return {"aggregate": agg, "rows": rows}
@@ -219,8 +224,9 @@ def main() -> None:
               f"(paper {100 * PAPER_REDUCTION:+.0f} %)")
     if agg["minutes_se"] is not None:
         print(f"random turbines: {agg['minutes_mean']:.2f} min mean per turbine, standard error "
-              f"{agg['minutes_se']:.2f} min over {agg['cases']} turbines")
-    print(f"done (mean <= {TARGET_MIN:g} min, sides >= {SIDE_MIN:.0%}, tower/nacelle >= "
+              f"{agg['minutes_se']:.2f} min over {agg['cases']} turbines (upper 95 % bound "
+              f"{agg['minutes_mean_upper95']:.2f})")
+    print(f"done (mean's upper 95 % bound <= {TARGET_MIN:g} min, sides >= {SIDE_MIN:.0%}, tower/nacelle >= "
           f"{STRUCTURE_MIN:.0%}, 0 violations): {agg['done']}")
     summary = {"scenarios": {k: {kk: vv for kk, vv in v.items()} for k, v in sc.items()},
                "random": agg}
