@@ -44,7 +44,7 @@ from wtcli.plan.mission import plan_mission  # noqa: E402
 
 # The tracking margin each mode is planned with, per hub-height wind (m/s).
 # One margin per mode for every wind (the plan states its positioning, not the day's wind).
-_PER_MODE = {"rtk_fixed": 2.0, "rtk_float": 2.5, "gnss": 4.0}
+_PER_MODE = {"rtk_fixed": 2.0, "rtk_float": 3.0, "gnss": 4.5}
 MARGINS = {10.0: dict(_PER_MODE), 8.0: dict(_PER_MODE), 12.0: dict(_PER_MODE)}
 # The wind whose margins docs/fly.md recommends (10 m/s is measured to show why not).
 DOCUMENTED = 8.0

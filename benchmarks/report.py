@@ -317,8 +317,8 @@ SECTIONS: tuple[Section, ...] = (
                 (f"modes.{mode}.summary.mean_deviation_m", f"modes.{mode}.summary.p99_9_worst_seed_m",
                  f"modes.{mode}.summary.min_clearance_m"),
                 "{:.2f} / {:.2f} / {:.2f} m", "clearance ≥ 3 m")
-              for mode, label, m in (("rtk_fixed", "RTK fixed", 2), ("rtk_float", "RTK float", 2.5),
-                                     ("gnss", "plain GNSS", 4)))
+              for mode, label, m in (("rtk_fixed", "RTK fixed", 2), ("rtk_float", "RTK float", 3),
+                                     ("gnss", "plain GNSS", 4.5)))
         + (F("clearance violations, all modes",
              ("modes.rtk_fixed.summary.clearance_violations", "modes.rtk_float.summary.clearance_violations",
               "modes.gnss.summary.clearance_violations"), "{} / {} / {}", "0"),),
