@@ -847,8 +847,8 @@ def _face_tiling(center: np.ndarray, normal: np.ndarray, u: np.ndarray, v: np.nd
                  tilt: np.ndarray | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
     """``_face_rows`` in the layout that needs the fewest photos, then the shortest path: rows
     along u or along v and, on a horizontal face (``tilt`` given), the frame's longer side along
-    either (the camera's yaw). A face a little taller than the frame flown in rows along it
-    takes two rows a few decimetres apart; in columns, or with the frame turned, one."""
+    either (the camera's yaw). A face a little taller than the frame, flown in rows along it,
+    takes two rows about a metre apart; in columns, or with the frame turned, fewer photos."""
     options = []
     for a, b, ha, hb in ((u, v, half_u, half_v), (v, u, half_v, half_u)):
         for t in ([None] if tilt is None else [tilt, u]):
