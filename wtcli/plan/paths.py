@@ -1146,15 +1146,14 @@ def tower_chunk(turbine: Turbine, site: Site, pp: PassParams, columns: int = 0,
     if columns > 2:
         # the two directions' ways in and home; an end they share costs both the same
         (f0, l0), (f1, l1) = ends(flown(1)), ends(flown(-1))
-        c = [0.0, 0.0]
-        for p, q, at in ((start_near, (f0, f1), 0), (end_toward, (l0, l1), 1)):
-            if p is None or np.allclose(q[0], q[1]):
-                continue
-            p = np.asarray(p, float)
-            for k in (0, 1):
-                c[k] += _way_length(site, pp, p, q[k]) if at == 0 else \
-                    _way_length(site, pp, q[k], p)
-        if c[1] < c[0] - 1e-9:
+        cost = np.zeros(2)
+        if start_near is not None and not np.allclose(f0, f1):
+            a = np.asarray(start_near, float)
+            cost += [_way_length(site, pp, a, f0), _way_length(site, pp, a, f1)]
+        if end_toward is not None and not np.allclose(l0, l1):
+            b = np.asarray(end_toward, float)
+            cost += [_way_length(site, pp, l0, b), _way_length(site, pp, l1, b)]
+        if cost[1] < cost[0] - 1e-9:
             order = flown(-1)
     climb, chunk = Chunk(turbine.id, "tower"), Chunk(turbine.id, "tower")
     for n, j in enumerate(order):
