@@ -123,3 +123,26 @@ def test_fast_photo_chain_runs_the_network_once_and_reads_the_same_angles(monkey
     b = sorted(b.phi_deg for b in fast.result.blades)
     assert len(a) == len(b) == 3
     assert max(abs((x - y + 180) % 360 - 180) for x, y in zip(a, b)) < 0.5
+
+
+def test_plan_runs_with_its_imports_out_of_the_collectors_way_and_gives_them_back(tmp_path,
+                                                                                 monkeypatch):
+    """While ``plan`` runs, what it imported (numba's objects, the planner's) is frozen out of
+    the collector's full passes; after it, nothing stays frozen for a caller in the same
+    process (only ``main``, where the process ends, leaves it so)."""
+    import gc
+
+    from typer.testing import CliRunner
+
+    import wtcli.plan.mission as mission
+    from wtcli.cli import app
+
+    seen = []
+    real = mission.plan_mission
+    monkeypatch.setattr(mission, "plan_mission",
+                        lambda *a, **k: seen.append(gc.get_freeze_count()) or real(*a, **k))
+    gc.unfreeze()  # what an earlier test's ``main`` left
+    done = CliRunner().invoke(app, ["plan", str(SAMPLE), "--out", str(tmp_path / "plan.json")])
+    assert done.exit_code == 0, done.output
+    assert seen and seen[0] > 1000
+    assert gc.get_freeze_count() == 0

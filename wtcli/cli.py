@@ -6,6 +6,7 @@ never needs editing to add one. Commands parse options, call one library functio
 
 from __future__ import annotations
 
+import gc
 import importlib
 import os
 import pkgutil
@@ -192,3 +193,7 @@ def main(argv: list[str] | None = None) -> None:
                 pass
             raise SystemExit(int(ExitCode.OK)) from None
         raise
+    finally:
+        # The process ends here: without this, the interpreter's last collections walk every
+        # object numba and the planner made (0.2-0.3 s of a 2 s photo -> plan, for nothing).
+        gc.freeze()

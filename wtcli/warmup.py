@@ -14,9 +14,24 @@ a plan then compiles nothing).
 
 from __future__ import annotations
 
+import gc
 import time
+from contextlib import contextmanager
+from typing import Iterator
 
 import numpy as np
+
+
+@contextmanager
+def imports_frozen() -> Iterator[None]:
+    """Keep every object alive so far (the modules a command imported: numba's, the planner's)
+    out of the garbage collector's full passes while the command runs: a plan's two full
+    passes walked them all, ~0.08 s of a 2 s photo -> plan. They live as long as the process."""
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
 
 
 def warm_up() -> float:

@@ -83,59 +83,60 @@ def register(app: typer.Typer) -> None:
         from wtcli.plan.exports import export_all
         from wtcli.plan.mission import BUDGET_KEYS, PATTERNS, plan_mission
         from wtcli.plan.path_views import draw_plan
+        from wtcli.warmup import imports_frozen
 
-        if pattern not in PATTERNS:
-            raise ConfigError(f"--pattern: expected one of {', '.join(PATTERNS)}, got {pattern!r}")
-        if dji_kmz is not None:  # checked before planning, not after
-            from wtcli.plan.dji_kmz import aircraft
+        with imports_frozen():
+            if pattern not in PATTERNS:
+                raise ConfigError(f"--pattern: expected one of {', '.join(PATTERNS)}, got {pattern!r}")
+            if dji_kmz is not None:  # checked before planning, not after
+                from wtcli.plan.dji_kmz import aircraft
 
-            aircraft(dji_kmz)
-            if export_dir is None:
-                raise ConfigError("--dji-kmz needs --export-dir (where to write the .kmz files)")
-        from wtcli.outputs import check_outputs
-        check_outputs(files=[out, picture], folders=[export_dir])  # before planning, not after
-        mission = load_mission(turbines_yaml)
-        azimuths, sources = blade_azimuths(mission, list(inputs or []), _pose(camera_pose), fast=fast)
-        for tid, src in sources.items():
-            err_console.print(f"{tid}: blade azimuths "
-                              f"{', '.join(f'{a:.1f}' for a in azimuths[tid])} deg from {src}")
-        with stage_bars(PLAN_STAGE_TEXT) as progress:
-            result = plan_mission(mission, azimuths=azimuths or None, pattern=pattern, workers=jobs,
-                                  progress=progress)
-        doc = document(PLAN_SCHEMA, PLAN_VERSION, result.to_dict())
-        if out is not None:
-            write_plan(out, result)
-        if export_dir is not None:
-            fl = mission.fleet
-            files = export_all(result, export_dir, stem=(out.stem if out else "mission"),
-                               cruise=fl.cruise_speed_m_s, hover=fl.inspection_speed_m_s,
-                               dji=dji_kmz)
-            err_console.print(f"exports: {len(files)} file(s) -> {export_dir}")
-        if picture is not None:
-            ok, png = cv2.imencode(".png", draw_plan(result))
-            atomic_write_bytes(picture, png.tobytes())
-        s = result.summary
-        if s.get("notes"):
-            err_console.print(f"note: {len(s['notes'])} adaptation(s) near the hub, nacelle or tower "
-                              "(oblique passes, dropped stations): see summary.notes in the plan")
-        if json_out:
-            typer.echo(dumps(doc))
-            return
-        cov = s["predicted_coverage"]
-        typer.echo(f"pattern {s['pattern']}: {len(result.routes)} UAV route(s), "
-                   f"length {s['total_length_m']:.0f} m, time {s['total_time_s'] / 60:.1f} min, "
-                   f"{s['photos']} photos, min clearance {s['min_clearance_m']:.2f} m "
-                   f"(safe {s['safe_distance_m']:g} m), GSD {s['coverage_gsd_mm']:.2f} mm/px"
-                   + ("" if s["gimbal_pitch_range_deg"] == [-90.0, 90.0] else
-                      ", gimbal pitch within [{:+g}, {:+g}] deg".format(*s["gimbal_pitch_range_deg"])))
-        for tid, c in cov.items():
-            typer.echo(f"{tid}: predicted blade coverage {c['blade_average']:.1%} "
-                       f"(worst side {c['min_side']:.1%}), tower/nacelle {c['structure']:.1%}")
-            b = s["time_budget"][tid]
-            typer.echo(f"{tid}: flight {b['total_s'] / 60:.1f} min = " + " + ".join(
-                f"{k[:-2].replace('_', ' ')} {b[k] / 60:.1f}" for k in BUDGET_KEYS))
-        v = s["violations"]
-        if any(v.values()):
-            typer.echo(f"UNSAFE against the real turbines: {v} - {s['first_violation']}")
-        if out is not None:
-            err_console.print(f"plan -> {out}")
+                aircraft(dji_kmz)
+                if export_dir is None:
+                    raise ConfigError("--dji-kmz needs --export-dir (where to write the .kmz files)")
+            from wtcli.outputs import check_outputs
+            check_outputs(files=[out, picture], folders=[export_dir])  # before planning, not after
+            mission = load_mission(turbines_yaml)
+            azimuths, sources = blade_azimuths(mission, list(inputs or []), _pose(camera_pose), fast=fast)
+            for tid, src in sources.items():
+                err_console.print(f"{tid}: blade azimuths "
+                                  f"{', '.join(f'{a:.1f}' for a in azimuths[tid])} deg from {src}")
+            with stage_bars(PLAN_STAGE_TEXT) as progress:
+                result = plan_mission(mission, azimuths=azimuths or None, pattern=pattern, workers=jobs,
+                                      progress=progress)
+            if out is not None:
+                write_plan(out, result)
+            if export_dir is not None:
+                fl = mission.fleet
+                files = export_all(result, export_dir, stem=(out.stem if out else "mission"),
+                                   cruise=fl.cruise_speed_m_s, hover=fl.inspection_speed_m_s,
+                                   dji=dji_kmz)
+                err_console.print(f"exports: {len(files)} file(s) -> {export_dir}")
+            if picture is not None:
+                ok, png = cv2.imencode(".png", draw_plan(result))
+                atomic_write_bytes(picture, png.tobytes())
+            s = result.summary
+            if s.get("notes"):
+                err_console.print(f"note: {len(s['notes'])} adaptation(s) near the hub, nacelle or tower "
+                                  "(oblique passes, dropped stations): see summary.notes in the plan")
+            if json_out:
+                typer.echo(dumps(document(PLAN_SCHEMA, PLAN_VERSION, result.to_dict())))
+                return
+            cov = s["predicted_coverage"]
+            typer.echo(f"pattern {s['pattern']}: {len(result.routes)} UAV route(s), "
+                       f"length {s['total_length_m']:.0f} m, time {s['total_time_s'] / 60:.1f} min, "
+                       f"{s['photos']} photos, min clearance {s['min_clearance_m']:.2f} m "
+                       f"(safe {s['safe_distance_m']:g} m), GSD {s['coverage_gsd_mm']:.2f} mm/px"
+                       + ("" if s["gimbal_pitch_range_deg"] == [-90.0, 90.0] else
+                          ", gimbal pitch within [{:+g}, {:+g}] deg".format(*s["gimbal_pitch_range_deg"])))
+            for tid, c in cov.items():
+                typer.echo(f"{tid}: predicted blade coverage {c['blade_average']:.1%} "
+                           f"(worst side {c['min_side']:.1%}), tower/nacelle {c['structure']:.1%}")
+                b = s["time_budget"][tid]
+                typer.echo(f"{tid}: flight {b['total_s'] / 60:.1f} min = " + " + ".join(
+                    f"{k[:-2].replace('_', ' ')} {b[k] / 60:.1f}" for k in BUDGET_KEYS))
+            v = s["violations"]
+            if any(v.values()):
+                typer.echo(f"UNSAFE against the real turbines: {v} - {s['first_violation']}")
+            if out is not None:
+                err_console.print(f"plan -> {out}")
