@@ -129,7 +129,8 @@ def test_plan_runs_with_its_imports_out_of_the_collectors_way_and_gives_them_bac
                                                                                  monkeypatch):
     """While ``plan`` runs, what it imported (numba's objects, the planner's) is frozen out of
     the collector's full passes; after it, nothing stays frozen for a caller in the same
-    process (only ``main``, where the process ends, leaves it so)."""
+    process (only ``main``, where the process ends, leaves it so), and what a caller froze
+    stays frozen."""
     import gc
 
     from typer.testing import CliRunner
@@ -146,3 +147,12 @@ def test_plan_runs_with_its_imports_out_of_the_collectors_way_and_gives_them_bac
     assert done.exit_code == 0, done.output
     assert seen and seen[0] > 1000
     assert gc.get_freeze_count() == 0
+    # a caller that froze objects of its own keeps them frozen
+    gc.freeze()
+    try:
+        frozen = gc.get_freeze_count()
+        done = CliRunner().invoke(app, ["plan", str(SAMPLE), "--out", str(tmp_path / "plan.json")])
+        assert done.exit_code == 0, done.output
+        assert gc.get_freeze_count() >= 0.9 * frozen  # not unfrozen (0)
+    finally:
+        gc.unfreeze()
