@@ -12,6 +12,9 @@ only (T1, the one the sample photo shows; the sample's T2 would double the plann
 1-minute load average before and after is recorded: on a shared CPU the figures are slower
 than on an idle one.
 
+The three ways run in turn (shipped, full, torch, then again), so the CPU's drift over the
+minutes weighs on each alike; ``cpu_reference`` before and after says how fast the CPU ran.
+
 It also times where the seconds go (``phases``): the shipped command once more in a fresh
 process, its steps timed from outside (wall and CPU seconds of each: imports, model load, the
 network's passes, the edge refiner, planning, writing; ``rest``: contours, pitch,
@@ -68,6 +71,25 @@ def one_turbine_yaml(folder: Path) -> Path:
     path = folder / "turbines-T1.yaml"
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
     return path
+
+
+def cpu_reference() -> float:
+    """Seconds a fixed single-threaded workload takes (numpy sorts and a Python loop, best of
+    3): how fast this CPU runs just now. Its speed drifts by up to a fifth within an hour on a
+    shared machine; runs made at other times compare through this figure."""
+    import numpy as np
+
+    x = np.random.default_rng(0).random(200_000)
+    best = float("inf")
+    for _ in range(3):
+        t0 = time.perf_counter()
+        for _ in range(20):
+            np.sort(x)
+        acc = 0
+        for i in range(300_000):
+            acc += i % 7
+        best = min(best, time.perf_counter() - t0)
+    return best
 
 
 def run_once(yaml: Path, photo: Path, out: Path, way: str = "shipped") -> float:
@@ -228,16 +250,22 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(phases(args.yaml, args.photo, args.phases_out, args.full)))
         return 0
     load_before = os.getloadavg()[0]
+    ref_before = cpu_reference()
     with tempfile.TemporaryDirectory() as tmp:
         yaml = args.yaml or one_turbine_yaml(Path(tmp))
         out = Path(tmp) / "plan.json"
-        res = {}
+        res = {way: {"runs_s": []} for way in WAYS}
         for way in WAYS:
             run_once(yaml, args.photo, out, way)  # warm-up
-            res[way] = {"runs_s": [run_once(yaml, args.photo, out, way) for _ in range(args.repeat)]}
-            res[way]["median_s"] = statistics.median(res[way]["runs_s"])
+        # The ways in turn, so that the CPU's drift over the minutes weighs on each alike.
+        for _ in range(args.repeat):
+            for way in WAYS:
+                res[way]["runs_s"].append(run_once(yaml, args.photo, out, way))
+        for r in res.values():
+            r["median_s"] = statistics.median(r["runs_s"])
         phase = {"shipped": run_phases(yaml, args.photo, out), "full": run_phases(yaml, args.photo, out, True)}
     load_after = os.getloadavg()[0]
+    ref_after = cpu_reference()
     for way, r in res.items():
         print(f"photo -> plan ({way}), median of {len(r['runs_s'])}: {r['median_s']:.2f} s wall "
               f"(runs {', '.join(f'{x:.2f}' for x in r['runs_s'])}); target {TARGET_S:.1f} s: "
@@ -250,12 +278,15 @@ def main(argv: list[str] | None = None) -> int:
             print(f"    {s['what']:<55s} {s['wall_s']:6.2f} s wall {s['cpu_s']:6.2f} s CPU")
     print(f"load average (1 min) before / after: {load_before:.2f} / {load_after:.2f} on "
           f"{os.cpu_count()} CPUs")
+    print(f"CPU reference (a fixed single-threaded workload, best of 3) before / after: "
+          f"{ref_before:.3f} / {ref_after:.3f} s")
     figures = {"median_s": res["shipped"]["median_s"], "runs_s": res["shipped"]["runs_s"],
                "full_median_s": res["full"]["median_s"], "full_runs_s": res["full"]["runs_s"],
                "torch_median_s": res["torch"]["median_s"], "torch_runs_s": res["torch"]["runs_s"],
                "phases": phase, "target_s": TARGET_S,
                "ratio_to_target": res["shipped"]["median_s"] / TARGET_S,
                "load_avg_1min": [load_before, load_after],
+               "cpu_reference_s": [ref_before, ref_after],
                "yaml": str(args.yaml) if args.yaml else "sample_images/turbines.yaml, T1 only",
                "photo": str(args.photo.relative_to(ROOT)) if args.photo.is_relative_to(ROOT)
                else str(args.photo)}

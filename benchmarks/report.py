@@ -200,7 +200,7 @@ SECTIONS: tuple[Section, ...] = (
         "`wtinspect plan turbines.yaml T1=PHOTO` on one turbine (the sample site's T1) in a fresh "
         "process (imports, model load, segmentation, pitch, planning, writing), after one warm-up "
         "run: as shipped (the converted network run by OpenCV, no torch; one pass), with `--full` "
-        "(four passes) and with torch's segmenter; then once more with its steps timed (CPU "
+        "(four passes) and with torch's segmenter, in turn; then once more with its steps timed (CPU "
         "seconds, one run: on a shared CPU the wall times are longer, the CPU seconds much the "
         "same). One pass and four are compared on 40 held-out front renders at 640 × 480.",
         (F("wall time, median of the runs", ("median_s",), "{:.2f} s", "< 2 s"),
@@ -208,6 +208,8 @@ SECTIONS: tuple[Section, ...] = (
            ("full_median_s", "torch_median_s"), "{:.2f} s / {:.2f} s"),
          F("1-minute load average while measured, before / after",
            ("load_avg_1min.0", "load_avg_1min.1"), "{:.1f} / {:.1f}", "0 (idle)"),
+         F("CPU reference (a fixed single-threaded workload), before / after",
+           ("cpu_reference_s.0", "cpu_reference_s.1"), "{:.3f} s / {:.3f} s"),
          F("CPU s: imports of the CLI / the segmenter / numba and the planner",
            tuple(f"phases.shipped.steps[step={k}].cpu_s" for k in
                  ("cli", "segmenter_imports", "planner_imports")), "{:.2f} / {:.2f} / {:.2f}"),
