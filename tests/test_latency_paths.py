@@ -127,7 +127,7 @@ def test_fast_photo_chain_runs_the_network_once_and_reads_the_same_angles(monkey
 
 def test_plan_runs_with_its_imports_out_of_the_collectors_way_and_gives_them_back(tmp_path,
                                                                                  monkeypatch):
-    """While ``plan`` runs, what it imported (numba's objects, the planner's) is frozen out of
+    """While ``plan`` runs, what it imported (the libraries, the planner's modules) is frozen out of
     the collector's full passes; after it, nothing stays frozen for a caller in the same
     process (only ``main``, where the process ends, leaves it so), and what a caller froze
     stays frozen."""

@@ -10,6 +10,9 @@ then loaded from numba's cache (the package's ``__pycache__``) in a fraction of 
 it. It goes through the same calls the planner and ``fly`` make, so the argument types (and
 hence the compiled versions) are the ones they use (``tests/test_latency_paths.py`` checks that
 a plan then compiles nothing).
+
+``imports_frozen``, for the same end: a command's garbage collections leave alone what it
+imported.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ import numpy as np
 
 @contextmanager
 def imports_frozen() -> Iterator[None]:
-    """Keep every object alive so far (the modules a command imported: numba's, the planner's)
+    """Keep every object alive so far (the libraries and planner modules a command imported)
     out of the garbage collector's full passes while the command runs: a plan's two full
     passes walked them all, ~0.08 s of a 2 s photo -> plan. They live as long as the process.
     Where the caller has frozen objects of its own, its choice is left as it is."""
