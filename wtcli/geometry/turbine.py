@@ -637,9 +637,12 @@ class Turbine:
                 "turn_deg": np.zeros(n)}
 
     # ---- mesh for rendering -----------------------------------------------------------------
-    def mesh(self, around: int = 20, spans: int = 40) -> Mesh:
+    def mesh(self, around: int = 20, spans: int = 40, round_tip: float = 0.0) -> Mesh:
         """Triangles for the renderer. ``face_part``: 0..N-1 blades, N tower, N+1 nacelle+hub
-        (the instance classes of segmentation), faces kept small so painter's order works."""
+        (the instance classes of segmentation), faces kept small so painter's order works.
+        ``round_tip``: each blade's end rounded off over this many tip chords of span (a
+        quarter ellipse in planform and thickness, as a real blade's tip), instead of ending
+        on its tip section; the blade still reaches ``tip_radius``."""
         V: list[np.ndarray] = []
         F: list[np.ndarray] = []
         part: list[np.ndarray] = []
@@ -657,6 +660,16 @@ class Turbine:
                                 np.linspace(0.25, 1, spans - spans // 4)])
             A, B = self.blade_semi_axes(f)
             s = s0 + f * (s1 - s0)
+            if round_tip > 0:
+                ell = min(round_tip * self.blade_tip_chord, 0.25 * (s1 - s0))
+                keep = s < s1 - ell
+                q = np.linspace(0.0, 1.0, 10)[:-1]  # the cap's point closes the last ring
+                sq = np.sqrt(1.0 - q ** 2)
+                se = s1 - ell + q * ell
+                Ae, Be = self.blade_semi_axes((se - s0) / (s1 - s0))
+                A = np.concatenate([A[keep], Ae * sq])
+                B = np.concatenate([B[keep], Be * sq])
+                s = np.concatenate([s[keep], se])
             psi = np.arange(around) * 2 * math.pi / around
             rings = (self.hub_center + s[:, None, None] * d
                      + (A[:, None] * np.cos(psi))[..., None] * c

@@ -45,6 +45,7 @@ _LOGO_COLOURS = ((0.55, 0.25, 0.05), (0.2, 0.45, 0.1), (0.15, 0.15, 0.6), (0.3, 
 # Every view render_sample takes: the whole-rotor views (the default mix, VIEW_ODDS) and the
 # wider, opt-in ones (wtcli.synth.views). A view's index seeds its scenes, so new views go last.
 ALL_VIEWS = VIEWS + WIDE_VIEWS
+ROUND_TIP_CHORDS = 1.0  # a wider view's blade tips: rounded over one tip chord of span
 VIEW_MIX_STREAM = 7_000_003  # the stream a view mix draws each image's view from
 WAVES_STREAM = 7_000_004  # the wider views' waves on the sea (a stream of their own)
 
@@ -247,8 +248,11 @@ def _render_turbines(turbines, scene: Scene, rng, zenith, horizon, blade_only: i
 
     verts, faces, gparts, owner, local = [], [], [], [], []
     off_v, off_p = 0, 0
+    # The wider views (close-ups above all) draw a blade's rounded end; the whole-rotor views
+    # keep the flat tip section their renders and the held-out benchmark were made with.
+    round_tip = ROUND_TIP_CHORDS if scene.view in WIDE_VIEWS else 0.0
     for j, t in enumerate(turbines):
-        m = t.mesh(*_mesh_detail(t, cam))
+        m = t.mesh(*_mesh_detail(t, cam), round_tip=round_tip)
         if j >= len(turbines) - blade_only:
             keep = m.face_part < t.n_blades
             m = Mesh(m.vertices, m.faces[keep], m.face_part[keep])

@@ -128,19 +128,33 @@ WIDE_SAMPLERS.update(dict.fromkeys(WIDE_VIEWS, sample_wide_scene))  # scene.samp
 def _closeup(rng, width, height, rotor_azimuth):
     """One blade filling the frame (tip, mid-span or root), seen from the front or the rear
     against the ground (from above), the sea (from above, a coast behind the turbine) or the
-    sky (from below)."""
+    sky (from below): half of them with the chord across a quarter to most of the frame (what
+    an inspection takes, hundreds per turbine), half wider, with more of the blade's length."""
     t = sample_turbine(rng, rotor_azimuth=rotor_azimuth)
     cam0 = _lens(rng, width, height)
     k = int(rng.integers(t.n_blades))
     region = _choice(rng, ("tip", "mid", "root"), (0.45, 0.35, 0.2))
-    f = {"tip": (0.78, 0.96), "mid": (0.4, 0.75), "root": (0.1, 0.35)}[region]
+    # Half are the inspection photo proper: the chord across a quarter to most of the frame
+    # (a tip's rounded end in it), taken with a longer lens (a zoom or a long prime).
+    filling = rng.random() < 0.5
+    f = {"tip": (0.94, 1.0) if filling else (0.78, 0.96), "mid": (0.4, 0.75),
+         "root": (0.1, 0.35)}[region]
     f = float(rng.uniform(*f))
     d = t.blade_direction(k)
     r0 = t.blade_root_offset
     point = t.hub_center + (r0 + f * (t.tip_radius - r0)) * d
     backdrop = _choice(rng, ("ground", "sea", "sky"), (0.5, 0.2, 0.3))
-    # Frame width at the blade: 15-55 % of the blade's length (the chord fills a good part).
-    frame_m = float(rng.uniform(0.15, 0.55)) * t.tip_radius
+    if filling:
+        # 4-12 m off (a drone keeps its distance; the lens, 8-60 deg wide, frames the chord)
+        chord = 2.0 * float(t.blade_semi_axes(np.array([f]))[0][0])
+        frame_m = chord * float(rng.uniform(1.3, 4.0))
+        want = float(rng.uniform(4.0, 12.0))
+        hfov = float(np.clip(2 * math.degrees(math.atan(frame_m / (2 * want))), 8.0, 60.0))
+        cam0 = Camera(width, height, SENSOR_WIDTH_MM / (2 * math.tan(math.radians(hfov) / 2)),
+                      SENSOR_WIDTH_MM)
+    else:
+        # Frame width at the blade: 15-55 % of the blade's length (the chord fills a good part).
+        frame_m = float(rng.uniform(0.15, 0.55)) * t.tip_radius
     dist = frame_m * cam0.focal_mm / cam0.sensor_width_mm
     side = 0.0 if rng.random() < 0.65 else 180.0
     heading = t.yaw_deg + side + float(rng.uniform(-55, 55))
