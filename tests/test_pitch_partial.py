@@ -161,3 +161,19 @@ def test_cli_says_so_and_plan_refuses_unknown_directions(cli, tmp_path):
     assert r.exit_code == 5, r.output
     assert "r.json" in r.output and "direction (hub -> tip) is unknown" in r.output
     assert not (tmp_path / "plan.json").exists()
+
+
+def test_a_tip_close_up_whose_axis_meets_far_blades_below_the_frame_keeps_its_hub_end():
+    # A tip close-up (its tip inside the frame, the root side cut by the top edge) and two far
+    # slivers at the bottom edge whose axes meet its axis just below the frame, beyond the tip:
+    # that point is no hub (a hub out of frame would have the frame cut the blade on its way
+    # there). The close-up's hub lies beyond its cut end (renderer close-up seed 88 flipped).
+    h, w = 480, 640
+    u = np.array([np.cos(np.radians(240)), -np.sin(np.radians(240))])
+    tip = np.array([245.0, 421.0])
+    near = fill(blade_polygon(tip - 700 * u, 240, 700, 60, 45), h, w)
+    s1 = fill(blade_polygon((359, 479), 65, 60, 4, 2), h, w)
+    s2 = fill(blade_polygon((174, 479), 109, 140, 6, 3), h, w)
+    res = pitch_from_instances(blades(near, s1, s2), expected_blades=0)
+    assert [b.source_index for b in res.blades] == [0]
+    assert res.hub_source == "frame_edge" and err(res.blades[0].phi_deg, 240, 360) < 2.0

@@ -1,6 +1,7 @@
 """Where a rotor's hub is in the image: the nacelle/hub instance's pixels near the blades'
 convergence point if there is a nacelle, else the convergence point (least-squares intersection
-of the blade axes), else the blades' common end. One blade alone: beyond the end the frame cuts
+of the blade axes) unless a blade shows its tip there (``tip_at``), else the blades' common end.
+One blade alone: beyond the end the frame cuts
 when its other end lies inside the frame (``cut_ends``: a tip, the hub out of frame), else its
 wider end when the whole blade is in frame and clearly tapers; else the hub cannot be placed.
 """
@@ -128,6 +129,24 @@ def cut_ends(inst: InstanceContours, ax: Axis, image_size: tuple[int, int], marg
     t = (xs[edge] - ax.centroid[0]) * u[0] + (ys[edge] - ax.centroid[1]) * u[1]
     q = reach * (ax.t_max - ax.t_min)
     return bool(t.min() <= ax.t_min + q), bool(t.max() >= ax.t_max - q)
+
+
+def tip_at(inst: InstanceContours, ax: Axis, point: np.ndarray,
+           image_size: tuple[int, int]) -> bool:
+    """Does the blade show its tip at its end nearer ``point``, a hub placed outside the frame:
+    that end inside the frame and the other cut by it? A hub out of frame would have the frame
+    cut the blade on its way there; so the hub lies beyond the cut end, not at ``point`` (a tip
+    close-up whose axis meets a far blade's beyond the tip). Where the point is in the frame
+    nothing is said: a root end can look narrower than a cut mid-span (the hub hides it)."""
+    h, w = image_size
+    if 0 <= point[0] <= w - 1 and 0 <= point[1] <= h - 1:
+        return False
+    low, high = cut_ends(inst, ax, image_size)
+    if low == high:
+        return False
+    ends = (ax.point(ax.t_min), ax.point(ax.t_max))
+    near = 0 if np.linalg.norm(ends[0] - point) <= np.linalg.norm(ends[1] - point) else 1
+    return not (low, high)[near]
 
 
 def touches(parts: ContourSet, point: np.ndarray, radius: float) -> bool:

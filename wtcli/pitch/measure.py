@@ -13,7 +13,7 @@ from wtcli.masks import Instances
 from wtcli.pitch.angles import (Axis, angle_diff, classify_theta, image_angle, normalize_phi,
                                 normalize_theta, principal_axis, rect_eq7)
 from wtcli.pitch.hub import (axes_convergence, common_end, cut_ends, ends_meet, nacelle_hub,
-                             region_centroid, touches, wider_end)
+                             region_centroid, tip_at, touches, wider_end)
 from wtcli.pitch.result import UNPLACED, BladePitch, PitchResult
 from wtcli.pitch.rotor import (admit_low_score_blades, longest_if_clearly, select_rotor,
                                touches_border, without_doubles, without_wide_tips)
@@ -79,6 +79,17 @@ def measure_pitch(contours: ContourSet, expected_blades: int | None = 3,
     conv = axes_convergence(axes, lengths)
     hub = nacelle_hub(nacelles, conv if conv is not None else candidate,
                       float(np.median(lengths)))
+    tipped = [] if conv is None or hub is not None else \
+        [k for k, (b, ax) in enumerate(zip(blades.instances, axes))
+         if tip_at(b, ax, conv, contours.image_size)]
+    if tipped:
+        # The axes meet beyond a blade's own tip, out of frame: no rotor's hub there. That
+        # blade (the largest such) is measured alone, its hub beyond the frame's cut.
+        big = max(tipped, key=lambda k: blades.instances[k].area)
+        others += tuple(blades.instances[k].source_index for k in range(len(keep)) if k != big)
+        keep, axes, lengths = [keep[big]], [axes[big]], [lengths[big]]
+        blades = all_blades[keep]
+        conv = None
     if hub is not None and len(axes) == 1:
         # One blade cannot check a nacelle against other blades; its taper can, unless the
         # frame cut its wider end (a cut end is as wide as the blade where the frame cut it).
