@@ -1,9 +1,9 @@
 """Where a rotor's hub is in the image: the nacelle/hub instance's pixels near the blades'
 convergence point if there is a nacelle, else the convergence point (least-squares intersection
-of the blade axes) unless a blade shows its tip there (``tip_at``), else the blades' common end.
-One blade alone: beyond the end the frame cuts
-when its other end lies inside the frame (``cut_ends``: a tip, the hub out of frame), else its
-wider end when the whole blade is in frame and clearly tapers; else the hub cannot be placed.
+of the blade axes; not one outside the frame beyond a blade's tip: ``tip_at``), else the blades'
+common end. One blade alone: beyond the end the frame cuts when its other end lies inside the
+frame (``cut_ends``: a tip, the hub out of frame), else its wider end when the whole blade is in
+frame and clearly tapers; else the hub cannot be placed.
 """
 
 from __future__ import annotations
