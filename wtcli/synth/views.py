@@ -29,8 +29,11 @@ MIN_CLEARANCE_M = 3.0  # the camera never closer to the structure (a drone would
 
 
 def _lens(rng: np.random.Generator, width: int, height: int) -> Camera:
-    hfov = float(rng.uniform(55.0, 84.0))
-    focal = SENSOR_WIDTH_MM / (2 * math.tan(math.radians(hfov) / 2))
+    return _camera_of_hfov(width, height, float(rng.uniform(55.0, 84.0)))
+
+
+def _camera_of_hfov(width: int, height: int, hfov_deg: float) -> Camera:
+    focal = SENSOR_WIDTH_MM / (2 * math.tan(math.radians(hfov_deg) / 2))
     return Camera(width, height, focal, SENSOR_WIDTH_MM)
 
 
@@ -150,8 +153,7 @@ def _closeup(rng, width, height, rotor_azimuth):
         frame_m = chord * float(rng.uniform(1.3, 4.0))
         want = float(rng.uniform(4.0, 12.0))
         hfov = float(np.clip(2 * math.degrees(math.atan(frame_m / (2 * want))), 8.0, 60.0))
-        cam0 = Camera(width, height, SENSOR_WIDTH_MM / (2 * math.tan(math.radians(hfov) / 2)),
-                      SENSOR_WIDTH_MM)
+        cam0 = _camera_of_hfov(width, height, hfov)
     else:
         # Frame width at the blade: 15-55 % of the blade's length (the chord fills a good part).
         frame_m = float(rng.uniform(0.15, 0.55)) * t.tip_radius
