@@ -82,24 +82,24 @@ def measure_pitch(contours: ContourSet, expected_blades: int | None = 3,
     tipped = [] if conv is None or hub is not None else \
         [k for k, (b, ax) in enumerate(zip(blades.instances, axes))
          if tip_at(b, ax, conv, contours.image_size)]
+    alone = None  # the one blade measured alone, the others left out as other rotors'
     if tipped:
         # The axes meet beyond a blade's own tip, out of frame: no rotor's hub there. That
         # blade (the largest such) is measured alone, its hub beyond the frame's cut.
-        big = max(tipped, key=lambda k: blades.instances[k].area)
-        others += tuple(blades.instances[k].source_index for k in range(len(keep)) if k != big)
-        keep, axes, lengths = [keep[big]], [axes[big]], [lengths[big]]
-        blades = all_blades[keep]
-        conv = None
+        alone, conv = tipped, None
     if hub is not None and len(axes) == 1:
         # One blade cannot check a nacelle against other blades; its taper can, unless the
         # frame cut its wider end (a cut end is as wide as the blade where the frame cut it).
         hub = _nacelle_if_taper_agrees(blades.instances[0], axes[0], hub, contours.image_size)
-    if (hub is None and conv is None and len(axes) >= 2 and not ends_meet(axes, common_end(axes))
+    if (alone is None and hub is None and conv is None and len(axes) >= 2
+            and not ends_meet(axes, common_end(axes))
             and not all(touches_border(b, contours.image_size) for b in blades)):
         # Blades that neither cross nor share an end (nor are all cut by the frame, their hub
         # beyond it) are no rotor: the largest one (the nearest turbine's, a close-up's) is
         # measured alone, the others are other turbines' blades.
-        big = max(range(len(keep)), key=lambda k: blades.instances[k].area)
+        alone = range(len(keep))
+    if alone is not None:
+        big = max(alone, key=lambda k: blades.instances[k].area)
         others += tuple(blades.instances[k].source_index for k in range(len(keep)) if k != big)
         keep, axes, lengths = [keep[big]], [axes[big]], [lengths[big]]
         blades = all_blades[keep]
