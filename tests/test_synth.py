@@ -334,6 +334,33 @@ def test_a_rounded_tip_stays_inside_the_blade_and_reaches_its_tip():
     assert len(rnd.vertices) > len(flat.vertices) - 40
 
 
+def test_a_tip_band_edge_runs_straight_across_the_blade():
+    """Both triangles of a quad between two rings get one paint colour: a band's edge follows a
+    ring, as a painted edge runs across a real blade (by face centroid the halves split and a
+    close-up showed the edge as a sawtooth)."""
+    from wtcli.synth.render import _shade
+    from wtcli.synth.scene import Environment
+
+    t = Turbine.with_rotor_azimuth(0.0, id="T", base=(0, 0, 0), hub_height=90, rotor_diameter=120,
+                                   yaw_deg=0.0)
+    m = t.mesh(round_tip=ROUND_TIP_CHORDS)
+    corners = m.vertices[m.faces]
+    normal = m.face_normals()
+    env = Environment(sky="clear", sun_azimuth_deg=0.0, sun_elevation_deg=40.0, sun_strength=0.8,
+                      backlit=False, visibility_m=2e4, cloud_cover=0.0, ground="fields",
+                      sea_distance_m=None, sea_bearing_deg=0.0, hills=0,
+                      turbine_albedo=(0.9, 0.9, 0.9), tip_bands=True, logo=False)
+    owner = np.zeros(len(m.faces), np.int32)
+    albedo, _ = _shade([t], owner, m.face_part.astype(np.int32), corners.mean(axis=1), normal,
+                       env, np.random.default_rng(3), np.ones(3, np.float32),
+                       np.ones(3, np.float32), corners)
+    red = albedo[:, 2] > 2 * albedo[:, 0]
+    for k in range(t.n_blades):
+        tube = np.nonzero(m.face_part == k)[0][:-20]  # the quads; the last `around` faces: cap
+        assert red[tube].any() and not red[tube].all()
+        pairs = red[tube].reshape(-1, 2)  # _tube_faces writes each quad's two triangles in turn
+        assert (pairs[:, 0] == pairs[:, 1]).all()
+
 def test_recorded_blade_angles_come_from_the_geometry(wide_samples):
     for samples in wide_samples.values():
         for s in samples:

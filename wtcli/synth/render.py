@@ -287,7 +287,7 @@ def _render_turbines(turbines, scene: Scene, rng, zenith, horizon, blade_only: i
     normal = np.where(facing[:, None] < 0, -normal, normal)
 
     albedo, light = _shade(turbines, face_owner[fi], face_local[fi], centroid, normal, env, rng,
-                           zenith, horizon)
+                           zenith, horizon, mesh.vertices[mesh.faces[fi]])
     # Smooth (Gouraud) shading: light the vertices with normals averaged over the visible faces
     # around them, interpolate across each face; paint colour (albedo) stays per face.
     V = mesh.vertices
@@ -354,9 +354,10 @@ def _sun_colour(env) -> np.ndarray:
         np.array([0.6, 0.8, 1.0], np.float32)
 
 
-def _shade(turbines, owner, local, centroid, normal, env, rng, zenith, horizon):
+def _shade(turbines, owner, local, centroid, normal, env, rng, zenith, horizon, corners):
     """Paint colour per face (white paint, tip bands, nacelle stripe) and a lighting function
-    (normals, unit vectors to the camera) -> (M, 4): RGB light and specular strength."""
+    (normals, unit vectors to the camera) -> (M, 4): RGB light and specular strength.
+    ``corners`` (M, 3, 3): each face's vertices."""
     F = len(owner)
     L = sun_direction(env)
     s = env.sun_strength
@@ -374,7 +375,13 @@ def _shade(turbines, owner, local, centroid, normal, env, rng, zenith, horizon):
                 red = np.array([0.18, 0.2, 0.75], np.float32)
                 for k in range(t.n_blades):
                     b = sel & (local == k)
-                    sp = (centroid[b] - t.hub_center) @ t.blade_direction(k) / t.tip_radius
+                    # A band edge runs along a ring of the blade's mesh, as a painted edge runs
+                    # straight across the blade: both triangles of a quad between two rings
+                    # take their colour from the quad's middle span (by centroid, the two halves
+                    # differ by a third of a ring's spacing and a close-up showed the edge as a
+                    # sawtooth).
+                    vs = (corners[b] - t.hub_center) @ t.blade_direction(k) / t.tip_radius
+                    sp = 0.5 * (vs.min(axis=1) + vs.max(axis=1))
                     stripe = ((sp > 1 - band) & (sp < 1 - band * 0.66)) | (sp > 1 - band * 0.33)
                     idx = np.nonzero(b)[0][stripe]
                     albedo[idx] = red
