@@ -518,6 +518,39 @@ def test_duplicate_blade_inside_a_better_one_is_dropped():
     assert len(infer.drop_duplicate_blades(inst, inside=0.8)) == 4
 
 
+def _rect(h, w, x0, x1, y0, y1):
+    m = np.zeros((h, w), bool)
+    m[y0:y1, x0:x1] = True
+    return m
+
+
+def test_a_lone_blades_end_read_as_a_nacelle_joins_the_blade():
+    """A "nacelle" on a lone blade's axis beyond its end, no wider than it and on no tower, is
+    the blade's tip (tip close-ups); one beside the blade, wider than it, on a tower or where
+    two blades meet stays a nacelle."""
+    from wtcli.segment.post import absorb_tip_nacelles
+
+    h, w = 120, 200
+    blade = _rect(h, w, 0, 150, 50, 70)  # a blade from the frame's left edge, 20 px wide
+    tip = _rect(h, w, 145, 172, 49, 71)
+
+    def inst(*parts):
+        return Instances(np.array([p[0] for p in parts], object), np.array([p[1] for p in parts]),
+                         np.array([0.9] * len(parts)))
+
+    out = absorb_tip_nacelles(inst(("blade", blade), ("nacelle", tip)))
+    assert list(out.labels) == ["blade"] and out.masks[0].sum() == (blade | tip).sum()
+    assert out.boxes[0].tolist() == [0, 49, 172, 71]
+    kept = [
+        inst(("blade", blade), ("nacelle", tip), ("tower", _rect(h, w, 150, 170, 71, 120))),
+        inst(("blade", blade), ("nacelle", _rect(h, w, 145, 200, 35, 85))),  # wider than the blade
+        inst(("blade", blade), ("nacelle", _rect(h, w, 100, 140, 70, 90))),  # beside it
+        inst(("blade", blade), ("nacelle", tip), ("blade", _rect(h, w, 165, 175, 0, 50))),
+    ]
+    for case in kept:
+        assert list(absorb_tip_nacelles(case).labels) == list(case.labels)
+
+
 def test_segment_image_keeps_low_score_blades_as_completion_candidates(monkeypatch):
     """segment_image returns what scores >= the threshold plus blades down to the candidate
     floor (for pitch's rotor completion); low-score towers and nacelles are not kept."""

@@ -24,6 +24,10 @@ MIRROR_BOX_SHIFT_PX = 0.5  # see unmirror_boxes
 # at 0.5.
 MASK_THRESHOLD = {"blade": 0.45, "tower": 0.5, "nacelle": 0.5}
 DUPLICATE_INSIDE = 0.3  # a blade this much inside a better-scored blade is the same blade
+# ``absorb_tip_nacelles``: a lone blade's end read as a nacelle lies on the blade's axis (its
+# middle within this share of the blade's width there) and is at most this much wider.
+NACELLE_IN_LINE = 0.5
+NACELLE_AS_WIDE = 1.3
 # Second look (``second_look``): a turbine whose detections span less than this share of the
 # frame is segmented again on a crop around it, padded by ZOOM_PAD of its size on each side.
 SMALL_TURBINE = 0.5
@@ -75,7 +79,75 @@ def instances(scores: np.ndarray, labels: np.ndarray, soft: np.ndarray, work_box
         paste_mask(masks[i], m, work_boxes[i], sx, sy, offset, MASK_THRESHOLD[names[i]])
     boxes[:, [0, 2]] = boxes[:, [0, 2]].clip(0, W)
     boxes[:, [1, 3]] = boxes[:, [1, 3]].clip(0, H)
-    return drop_duplicate_blades(Instances(names, masks, scores[keep].clip(0, 1), boxes))
+    inst = drop_duplicate_blades(Instances(names, masks, scores[keep].clip(0, 1), boxes))
+    return absorb_tip_nacelles(inst)
+
+
+def _axis(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A pixel set's centre and unit main axis (its principal direction)."""
+    c = pts.mean(axis=0)
+    w, v = np.linalg.eigh(np.cov((pts - c).T))
+    return c, v[:, int(np.argmax(w))]
+
+
+def absorb_tip_nacelles(inst: Instances) -> Instances:
+    """A "nacelle" that is the end of a lone blade becomes part of that blade.
+
+    A nacelle carries the hub, where every blade's root meets, and sits on the tower. In a
+    tip close-up the network can take the blade's rounded end for a nacelle (real photos: the
+    last chord of a blade tip against the ground). Such a detection touches one blade and no
+    tower, lies on that blade's axis beyond its end, and is no wider than the blade there
+    (NACELLE_IN_LINE, NACELLE_AS_WIDE): a true nacelle seen with one blade is beside the
+    blade's root, or wider than it, or on a tower."""
+    nac = np.nonzero(inst.labels == "nacelle")[0]
+    blades = np.nonzero(inst.labels == "blade")[0]
+    if not len(nac) or not len(blades):
+        return inst
+    H, W = inst.image_size
+    r = max(2, int(round(0.005 * max(H, W))))
+    grow = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    towers = inst.of("tower").union()
+    masks, boxes = inst.masks.copy(), inst.boxes.copy()
+    drop = []
+    for i in nac:
+        m = inst.masks[i]
+        if m.sum() < 16:
+            continue
+        near = cv2.dilate(m.view(np.uint8), grow).astype(bool)
+        touching = [j for j in blades if (near & inst.masks[j]).any()]
+        if len(touching) != 1 or (near & towers).any():
+            continue
+        j = touching[0]
+        b = inst.masks[j]
+        bp = np.argwhere(b)[:, ::-1].astype(float)  # (x, y)
+        np_ = np.argwhere(m)[:, ::-1].astype(float)
+        if len(bp) < 16:
+            continue
+        c, u = _axis(bp)
+        n = np.array([-u[1], u[0]])
+        sb, tb = (bp - c) @ u, (bp - c) @ n
+        sn, tn = (np_ - c) @ u, (np_ - c) @ n
+        if np.median(sn) < 0:  # look along the blade towards the detection
+            sb, sn = -sb, -sn
+        lo, hi = np.percentile(sb, [1, 99])
+        length = hi - lo
+        end = sb > hi - 0.15 * length  # the blade's last stretch towards the detection
+        if end.sum() < 8 or length <= 0:
+            continue
+        width = np.percentile(tb[end], 99) - np.percentile(tb[end], 1)
+        mid = 0.5 * (np.percentile(tb[end], 99) + np.percentile(tb[end], 1))
+        n_width = np.percentile(tn, 99) - np.percentile(tn, 1)
+        beyond = np.mean(sn > hi - 0.15 * length)
+        if (beyond >= 0.9 and abs(np.median(tn) - mid) <= NACELLE_IN_LINE * width
+                and n_width <= NACELLE_AS_WIDE * width):
+            masks[j] |= m
+            boxes[j, :2] = np.minimum(boxes[j, :2], inst.boxes[i, :2])
+            boxes[j, 2:] = np.maximum(boxes[j, 2:], inst.boxes[i, 2:])
+            drop.append(i)
+    if not drop:
+        return inst
+    keep = np.setdiff1d(np.arange(len(inst)), drop)
+    return Instances(inst.labels[keep], masks[keep], inst.scores[keep], boxes[keep])
 
 
 def drop_duplicate_blades(inst: Instances, inside: float = DUPLICATE_INSIDE) -> Instances:
