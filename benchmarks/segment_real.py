@@ -12,7 +12,9 @@ since consecutive frames are near-duplicates.
 
 * ``--model PATH`` (default the shipped ``models/wtseg-r18s.pt``): one model for every fold. It
   must not have trained on a fold's photos: a file whose meta names ``real`` photos is accepted
-  only for the sequences in its ``real_holdout``.
+  only for the sequences in its ``real_holdout``. The shipped model trained on all of them, so
+  its figures are its recipe's, cross-validated with ``--runs``; ``segment_real.json`` holds the
+  renders-only model it replaced (``git show 5d1df58:models/wtseg-r18s.pt``).
 * ``--runs DIR``: fold ``SEQ`` is measured with ``DIR/SEQ/model.pt``; with ``--train ARGS`` the
   folds missing one are trained first, ``wtinspect train ARGS --real DIR --real-holdout-sequence
   SEQ --out DIR/SEQ`` (a stopped fold resumed), so cross-validation is one command.
@@ -27,7 +29,7 @@ views whose truth splits into exactly three blades at one hub: the share where p
 exactly three blades, and the blade-angle error against pitch run on the split truth (each true
 blade matched to the measured one of nearest phi; theta mod 180, phi mod 360).
 
-Writes ``benchmarks/results/segment_real.json`` (``_results.save``) for the shipped model on
+Writes ``benchmarks/results/segment_real.json`` (``_results.save``) for the default model on
 every photo, ``segment_real_finetune.json`` with ``--runs``; ``--model``, ``--only``,
 ``--limit``, ``--max-side`` and ``--no-refine`` need ``--out``, so that another model or a
 subset never overwrites those figures.
