@@ -527,7 +527,7 @@ def _rect(h, w, x0, x1, y0, y1):
 def test_a_lone_blades_end_read_as_a_nacelle_joins_the_blade():
     """A "nacelle" on a lone blade's axis beyond its end, no wider than it and on no tower, is
     the blade's tip (tip close-ups); one beside the blade, wider than it, on a tower or where
-    two blades meet stays a nacelle."""
+    two blades meet stays a nacelle, and so does one scoring under the threshold."""
     from wtcli.segment.post import absorb_tip_nacelles
 
     h, w = 120, 200
@@ -538,17 +538,21 @@ def test_a_lone_blades_end_read_as_a_nacelle_joins_the_blade():
         return Instances(np.array([p[0] for p in parts], object), np.array([p[1] for p in parts]),
                          np.array([0.9] * len(parts)))
 
-    out = absorb_tip_nacelles(inst(("blade", blade), ("nacelle", tip)))
+    out = absorb_tip_nacelles(inst(("blade", blade), ("nacelle", tip)), 0.5)
     assert list(out.labels) == ["blade"] and out.masks[0].sum() == (blade | tip).sum()
+    doubtful = inst(("blade", blade), ("nacelle", tip))
+    doubtful = Instances(doubtful.labels, doubtful.masks, np.array([0.9, 0.4]))
+    assert list(absorb_tip_nacelles(doubtful, 0.5).labels) == ["blade", "nacelle"]
     assert out.boxes[0].tolist() == [0, 49, 172, 71]
     kept = [
         inst(("blade", blade), ("nacelle", tip), ("tower", _rect(h, w, 150, 170, 71, 120))),
         inst(("blade", blade), ("nacelle", _rect(h, w, 145, 200, 35, 85))),  # wider than the blade
         inst(("blade", blade), ("nacelle", _rect(h, w, 100, 140, 70, 90))),  # beside it
         inst(("blade", blade), ("nacelle", tip), ("blade", _rect(h, w, 165, 175, 0, 50))),
+        inst(("blade", _rect(h, w, 30, 180, 50, 70)), ("nacelle", _rect(h, w, 0, 35, 49, 71))),  # cut
     ]
     for case in kept:
-        assert list(absorb_tip_nacelles(case).labels) == list(case.labels)
+        assert list(absorb_tip_nacelles(case, 0.5).labels) == list(case.labels)
 
 
 def test_segment_image_keeps_low_score_blades_as_completion_candidates(monkeypatch):

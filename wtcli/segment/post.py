@@ -79,8 +79,7 @@ def instances(scores: np.ndarray, labels: np.ndarray, soft: np.ndarray, work_box
         paste_mask(masks[i], m, work_boxes[i], sx, sy, offset, MASK_THRESHOLD[names[i]])
     boxes[:, [0, 2]] = boxes[:, [0, 2]].clip(0, W)
     boxes[:, [1, 3]] = boxes[:, [1, 3]].clip(0, H)
-    inst = drop_duplicate_blades(Instances(names, masks, scores[keep].clip(0, 1), boxes))
-    return absorb_tip_nacelles(inst)
+    return drop_duplicate_blades(Instances(names, masks, scores[keep].clip(0, 1), boxes))
 
 
 def _axis(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -90,29 +89,33 @@ def _axis(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return c, v[:, int(np.argmax(w))]
 
 
-def absorb_tip_nacelles(inst: Instances) -> Instances:
-    """A "nacelle" that is the end of a lone blade becomes part of that blade.
+def absorb_tip_nacelles(inst: Instances, score_threshold: float) -> Instances:
+    """A "nacelle" that is the end of a lone blade becomes part of that blade; only detections
+    scoring ``score_threshold`` or more (what ``segment`` reports) are weighed, so a doubtful
+    detection never grows a blade's mask. Run on the whole photo, after the second look.
 
     A nacelle carries the hub, where every blade's root meets, and sits on the tower. In a
     tip close-up the network can take the blade's rounded end for a nacelle (real photos: the
-    last chord of a blade tip against the ground). Such a detection touches one blade and no
-    tower, lies on that blade's axis beyond its end, and is no wider than the blade there
-    (NACELLE_IN_LINE, NACELLE_AS_WIDE): a true nacelle seen with one blade is beside the
-    blade's root, or wider than it, or on a tower."""
-    nac = np.nonzero(inst.labels == "nacelle")[0]
-    blades = np.nonzero(inst.labels == "blade")[0]
+    last chord of a blade tip against the ground). Such a detection lies inside the frame,
+    touches one blade and no tower, lies on that blade's axis beyond its end, and is no wider
+    than the blade there (NACELLE_IN_LINE, NACELLE_AS_WIDE): a true nacelle seen with one blade
+    is beside the blade's root, or wider than it, or on a tower, or (seen along the blade, at
+    its root) cut by the frame."""
+    sure = inst.scores >= score_threshold
+    nac = np.nonzero(sure & (inst.labels == "nacelle"))[0]
+    blades = np.nonzero(sure & (inst.labels == "blade"))[0]
     if not len(nac) or not len(blades):
         return inst
     H, W = inst.image_size
     r = max(2, int(round(0.005 * max(H, W))))
     grow = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-    towers = inst.of("tower").union()
+    towers = inst[sure & (inst.labels == "tower")].union()
     masks, boxes = inst.masks.copy(), inst.boxes.copy()
     drop = []
     for i in nac:
         m = inst.masks[i]
-        if m.sum() < 16:
-            continue
+        if m.sum() < 16 or m[0].any() or m[-1].any() or m[:, 0].any() or m[:, -1].any():
+            continue  # a tip close-up shows the tip's end in the frame; a cut part is no tip
         near = cv2.dilate(m.view(np.uint8), grow).astype(bool)
         touching = [j for j in blades if (near & inst.masks[j]).any()]
         if len(touching) != 1 or (near & towers).any():
@@ -134,9 +137,9 @@ def absorb_tip_nacelles(inst: Instances) -> Instances:
         end = sb > hi - 0.15 * length  # the blade's last stretch towards the detection
         if end.sum() < 8 or length <= 0:
             continue
-        width = np.percentile(tb[end], 99) - np.percentile(tb[end], 1)
-        mid = 0.5 * (np.percentile(tb[end], 99) + np.percentile(tb[end], 1))
-        n_width = np.percentile(tn, 99) - np.percentile(tn, 1)
+        t_lo, t_hi = np.percentile(tb[end], [1, 99])
+        width, mid = t_hi - t_lo, 0.5 * (t_lo + t_hi)
+        n_width = np.subtract(*np.percentile(tn, [99, 1]))
         beyond = np.mean(sn > hi - 0.15 * length)
         if (beyond >= 0.9 and abs(np.median(tn) - mid) <= NACELLE_IN_LINE * width
                 and n_width <= NACELLE_AS_WIDE * width):
