@@ -68,7 +68,7 @@ SECTIONS: tuple[Section, ...] = (
     Section(
         "Segmentation: held-out renders", "segment_accuracy",
         "python benchmarks/segment_accuracy.py --threads 2",
-        "The shipped segmenter and edge refiner as `segment` runs them (second look, mirror pass, "
+        "The shipped segmenter and edge refiner as `segment` runs them (wide look, second look, mirror pass, "
         "refined edges, bfloat16 trunk where the CPU has it) on 300 renders at 640 × 480 that no "
         "training run saw (seeds 9 000 000 +, 200 of them front views). Mask IoU and AP50 against "
         "the renderer's outline labels; blade count and angle through segment → contours → pitch.",
@@ -95,7 +95,7 @@ SECTIONS: tuple[Section, ...] = (
         "folder is held out for it (G. Zampokas et al., \"WTA/TLA: A UAV-captured Dataset for "
         "Semantic Segmentation of Energy Infrastructure\", ICUAS 2022, "
         "doi:10.1109/ICUAS54217.2022.9836096), segmented as `segment` does by default; tower is "
-        "scored as tower ∪ nacelle against the photos' tower class. Measured when it was shipped.",
+        "scored as tower ∪ nacelle against the photos' tower class.",
         (F("blade / tower IoU, pooled", ("pooled.blade_iou", "pooled.tower_iou", "pooled.photos"),
            "{:.3f} / {:.3f} ({} photos)"),
          F("front views with three true blades read as three",
@@ -137,7 +137,7 @@ SECTIONS: tuple[Section, ...] = (
            ("speed.speedup_vs_stock_fp32", "speed.ours_fp32_images_per_s"), "{:.1f}× ({:.2f} images/s)"),
          F("without the mirror pass (`--no-flip`)",
            ("speed.speedup_vs_stock_no_flip", "speed.ours_no_flip_images_per_s"), "{:.1f}× ({:.2f} images/s)"),
-         F("all that `segment` runs by default (second look, refiner), this render / a distant one",
+         F("all that `segment` runs by default (wide look, second look, refiner), this render / a distant one",
            ("speed.speedup_vs_stock_segment.this render", "speed.speedup_vs_stock_segment.a distant render"),
            "{:.1f}× / {:.1f}×"))),
     Section(

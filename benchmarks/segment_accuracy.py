@@ -37,8 +37,8 @@
 4. Edge refinement (``wtcli.segment.refine``; ``--no-refine`` skips it): every figure
    of the second look again with the instances' edges refined, as ``segment`` gives them
    (``synthetic.refined``, ``real.refined``), and the speed with it (``speed.ours_refined_...``;
-   ``speed.ours_segment_images_per_s``: all that ``segment`` runs by default, the second look
-   and the refiner, on the speed render and on a distant one, with its ratio to the stock
+   ``speed.ours_segment_images_per_s``: all that ``segment`` runs by default, the wide look,
+   the second look and the refiner, on the speed render and on a distant one, with its ratio to the stock
    network in ``speedup_vs_stock_segment``).
 
 Results are printed and written as JSON (``--out``, default benchmarks/results/segment_accuracy.json),
@@ -69,7 +69,7 @@ from wtcli.masks import Instances  # noqa: E402
 from wtcli.segment.data import DEV_SEED_BASE, HELDOUT_SEED_BASE, image_tensor  # noqa: E402
 from wtcli.segment.evaluate import Evaluator, mask_iou  # noqa: E402
 from wtcli.pitch import CANDIDATE_FLOOR, DEFAULT_SCORE_THRESHOLD  # noqa: E402
-from wtcli.segment.infer import load_model, predict, second_look  # noqa: E402
+from wtcli.segment.infer import load_model, predict, second_look, wide_look  # noqa: E402
 from wtcli.segment.post import absorb_tip_nacelles  # noqa: E402
 from wtcli.segment.model import resolve_weights  # noqa: E402
 from wtcli.segment.refine import load_refiner, refine_edges, resolve_refiner  # noqa: E402
@@ -79,6 +79,13 @@ ROOT = Path(__file__).resolve().parents[1]
 # frame height). The pipeline's own photo, from S_p at the zone radius, is well above this;
 # below it the turbine is small and far (blades a few pixels wide).
 FILL_WORKING = 0.35
+
+
+def looks(model, image, first):
+    """The wide look, then the second look, on the first look's instances from the candidate
+    floor up: what ``segment_image`` runs before its tip rule and the refiner."""
+    return second_look(model, image, wide_look(model, image, first, CANDIDATE_FLOOR, sure=0.5),
+                       CANDIDATE_FLOOR)
 
 
 def theta_diff(a: float, b: float) -> float:
@@ -139,7 +146,7 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
     # convention), so figures compare with models trained on those labels.
     ev_half, zev_half = Evaluator(0.5), Evaluator(0.5)
     zoom = {"ev": Evaluator(0.5), "right": 0, "errs": [], "by_fill": {"distant": [0, 0], "working": [0, 0]}}
-    # What `segment` gives by default: the second look's instances, edges refined.
+    # What `segment` gives by default: the wide and second looks' instances, edges refined.
     rf = {"ev": Evaluator(0.5), "half": Evaluator(0.5), "right": 0, "errs": [],
           "by_fill": {"distant": [0, 0], "working": [0, 0]}}
     views: dict[str, int] = {}
@@ -163,8 +170,7 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
         pred = predict(model, s.image, score_threshold=0.0)
         ev.add(pred, s.instances)
         # What segment_image gives (small turbines looked at again), from the candidate floor up.
-        zpred = absorb_tip_nacelles(second_look(model, s.image, pred[pred.scores >= CANDIDATE_FLOOR],
-                                                CANDIDATE_FLOOR), 0.5)
+        zpred = absorb_tip_nacelles(looks(model, s.image, pred[pred.scores >= CANDIDATE_FLOOR]), 0.5)
         zoom["ev"].add(zpred, s.instances)
         half = render_sample(seed_base + i, width=width, height=height,
                              view="front" if i % 2 == 0 else None, labels="half").instances
@@ -279,8 +285,7 @@ def speed(model, runs: int, with_stock: bool, fp32_model=None, refiner=None) -> 
     far = next(r.image for r in (render_sample(HELDOUT_SEED_BASE + 999_998 - k, width=1024, height=683,
                                                view="front") for k in range(500))
                if r.truth["fill"] < FILL_WORKING)
-    zoomed = {name: clock(lambda im=im: second_look(model, im, predict(model, im, CANDIDATE_FLOOR),
-                                                    CANDIDATE_FLOOR))
+    zoomed = {name: clock(lambda im=im: looks(model, im, predict(model, im, CANDIDATE_FLOOR)))
               for name, im in (("this render", img), ("a distant render", far))}
     out = {"input": "1024x683 BGR render", "runs": runs, "threads": torch.get_num_threads(),
            "precision": getattr(model, "precision", "fp32"),
@@ -288,10 +293,10 @@ def speed(model, runs: int, with_stock: bool, fp32_model=None, refiner=None) -> 
     if refiner is not None:  # the network, then the edge refiner: what `segment --no-zoom` runs
         out["ours_refined_images_per_s"] = clock(
             lambda: refine_edges(refiner, img, predict(model, img, score_threshold=0.5)))
-        # Everything `segment` runs by default: the candidate floor, the second look, the refiner.
+        # Everything `segment` runs by default: the candidate floor, the wide and second looks, the refiner.
         out["ours_segment_images_per_s"] = {
-            name: clock(lambda im=im: refine_edges(refiner, im, second_look(
-                model, im, predict(model, im, CANDIDATE_FLOOR), CANDIDATE_FLOOR)))
+            name: clock(lambda im=im: refine_edges(refiner, im, looks(
+                model, im, predict(model, im, CANDIDATE_FLOOR))))
             for name, im in (("this render", img), ("a distant render", far))}
     # Without the mirrored masks (segment --no-flip), for the record.
     out["ours_no_flip_images_per_s"] = clock(lambda: predict(model, img, score_threshold=0.5, flip=False))
@@ -371,7 +376,7 @@ def real_photos(model, root: Path, log, refiner=None) -> dict:
         tower = (pred.of("tower").union() | pred.of("nacelle").union()) if len(pred) else np.zeros(sem.shape, bool)
         blade_iou.append(mask_iou(blade, sem == 1))
         tower_iou.append(mask_iou(tower, sem == 2))
-        zlow = absorb_tip_nacelles(second_look(model, img, low, CANDIDATE_FLOOR), 0.5)
+        zlow = absorb_tip_nacelles(looks(model, img, low), 0.5)
         zpred = zlow[zlow.scores >= 0.5] if len(zlow) else zlow
         zblade = zpred.of("blade").union() if len(zpred) else np.zeros(sem.shape, bool)
         ztower = (zpred.of("tower").union() | zpred.of("nacelle").union()) if len(zpred) else np.zeros(sem.shape, bool)

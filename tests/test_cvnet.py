@@ -133,7 +133,8 @@ def test_plan_from_a_photo_imports_no_torch(tmp_path):
 
 def test_plan_segments_a_photo_once_by_default_and_four_times_full(cli, tmp_path, monkeypatch):
     """`plan`'s --fast (the default): one pass of the network; --full: the photo and its mirror,
-    twice (the sample photo's turbine is small enough for a second look)."""
+    twice (the sample photo's turbine is small enough for a second look); never the wide look
+    (a plan's photo shows a whole rotor)."""
     import yaml
 
     doc = yaml.safe_load((ROOT / "sample_images" / "turbines.yaml").read_text())
@@ -144,10 +145,11 @@ def test_plan_segments_a_photo_once_by_default_and_four_times_full(cli, tmp_path
     calls = []
     detect = cvnet.CvModel.detect
     monkeypatch.setattr(cvnet.CvModel, "detect",
-                        lambda self, img, flip: calls.append(flip) or detect(self, img, flip))
+                        lambda self, img, flip, size=None: calls.append((flip, size))
+                        or detect(self, img, flip, size))
     photo = f"T1={ROOT / 'sample_images' / 'images' / '00000.jpg'}"
     azimuths = []
-    for flags, want in (([], [False]), (["--full"], [True, True])):
+    for flags, want in (([], [(False, None)]), (["--full"], [(True, None), (True, None)])):
         calls.clear()
         res = cli("plan", site, photo, "--out", tmp_path / "plan.json", *flags)
         assert res.exit_code == 0, res.stderr

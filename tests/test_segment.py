@@ -240,7 +240,8 @@ def test_segment_no_flip_is_recorded(cli, photo_folder, random_weights, tmp_path
         res = cli("segment", photo_folder, "--out", out, "--model", random_weights, "--json",
                   "--score-threshold", "0.0", flag)
         assert res.exit_code == 0, res.stderr
-        assert json.loads(res.stdout)["settings"]["flip"] is (flag == "--flip")
+        settings = json.loads(res.stdout)["settings"]
+        assert settings["flip"] is (flag == "--flip") and settings["wide"] is True
         runs[flag] = json.loads((out / "instances.json").read_text())["annotations"]
     a, b = runs["--flip"], runs["--no-flip"]
     assert a and b and [(x["bbox"], x["score"]) for x in a] != [(x["bbox"], x["score"]) for x in b]
@@ -445,7 +446,7 @@ def test_each_class_mask_is_cut_at_its_own_threshold(monkeypatch):
     det = {"scores": torch.tensor([0.9, 0.8]), "labels": torch.tensor([1, 2]),
            "boxes": torch.tensor([[10.0, 10.0, 40.0, 20.0], [50.0, 10.0, 60.0, 50.0]]),
            "masks": torch.full((2, 1, 28, 28), 0.47)}
-    monkeypatch.setattr(infer, "_detect", lambda model, x, flip=False: (det, (64, 96)))
+    monkeypatch.setattr(infer, "_detect", lambda model, x, flip=False, size=None: (det, (64, 96)))
     inst = infer.predict(build_model(), np.zeros((64, 96, 3), np.uint8))
     assert list(inst.labels) == ["blade", "tower"]
     assert inst.masks[0].sum() >= 0.9 * 30 * 10 and inst.masks[1].sum() == 0
@@ -555,6 +556,47 @@ def test_a_lone_blades_end_read_as_a_nacelle_joins_the_blade():
         assert list(absorb_tip_nacelles(case, 0.5).labels) == list(case.labels)
 
 
+def test_the_wide_look_adds_a_blade_too_big_for_the_first_look_and_drops_its_pieces():
+    """A wide-look blade spanning most of the frame joins, and the first look's pieces of it
+    (its tip read as a nacelle, an edge as a tower, a weaker copy of it) go; it does not join
+    where the first look has it surer, or split it into surer blades (two meeting at a hub),
+    nor when it is small (the first look sees those as well) or doubtful."""
+    from wtcli.segment.post import wide_look
+
+    h, w = 120, 200
+    big = _rect(h, w, 0, 180, 20, 100)
+
+    def inst(*parts):
+        return Instances(np.array([p[0] for p in parts], object), np.array([p[1] for p in parts]),
+                         np.array([p[2] for p in parts], float))
+
+    def looked(first, wide):
+        asked = []
+
+        def look(img, thr, ms, fl):
+            asked.append(img.shape)
+            return wide
+
+        out = wide_look(look, np.zeros((h, w, 3), np.uint8), first, 0.2, sure=0.5)
+        assert asked == [(h, w, 3)]
+        return sorted((lab, round(float(sc), 2)) for lab, sc in zip(out.labels, out.scores))
+
+    pieces = inst(("nacelle", _rect(h, w, 150, 180, 30, 90), 0.8),
+                  ("tower", _rect(h, w, 0, 10, 20, 100), 0.6),
+                  ("blade", _rect(h, w, 0, 120, 20, 100), 0.45),
+                  ("tower", _rect(h, w, 185, 195, 0, 120), 0.9))  # beside it: stays
+    assert looked(pieces, inst(("blade", big, 0.95))) == [("blade", 0.95), ("tower", 0.9)]
+    surer_same = inst(("blade", _rect(h, w, 0, 170, 22, 98), 0.97))
+    assert looked(surer_same, inst(("blade", big, 0.95))) == [("blade", 0.97)]
+    two = inst(("blade", _rect(h, w, 0, 90, 20, 100), 0.99), ("blade", _rect(h, w, 90, 180, 20, 100), 0.98))
+    assert looked(two, inst(("blade", big, 0.9))) == [("blade", 0.98), ("blade", 0.99)]
+    two = inst(("blade", _rect(h, w, 0, 90, 20, 100), 0.7), ("blade", _rect(h, w, 90, 180, 20, 100), 0.6))
+    assert looked(two, inst(("blade", big, 0.9))) == [("blade", 0.6), ("blade", 0.7)]  # they cover it
+    small = inst(("blade", _rect(h, w, 0, 100, 20, 60), 0.99))
+    assert looked(pieces, small) == looked(pieces, inst(("blade", big, 0.4))) == sorted(
+        (lab, round(float(sc), 2)) for lab, sc in zip(pieces.labels, pieces.scores))
+
+
 def test_segment_image_keeps_low_score_blades_as_completion_candidates(monkeypatch):
     """segment_image returns what scores >= the threshold plus blades down to the candidate
     floor (for pitch's rotor completion); low-score towers and nacelles are not kept."""
@@ -566,17 +608,18 @@ def test_segment_image_keeps_low_score_blades_as_completion_candidates(monkeypat
                       np.array([0.9, 0.3, 0.3, 0.1, 0.6]))
     asked = []
 
-    def fake_predict(model, image, score_threshold=0.5, max_size=None, flip=True):
-        asked.append(score_threshold)
+    def fake_predict(model, image, score_threshold=0.5, max_size=None, flip=True, size=None):
+        asked.append((score_threshold, size))
         return every[every.scores >= score_threshold]
 
     monkeypatch.setattr(infer, "predict", fake_predict)
     img = np.zeros((h, w, 3), np.uint8)
     inst = infer.segment_image(img, model=object())
-    assert asked == [0.2] and list(inst.scores) == [0.9, 0.3, 0.6]
+    assert asked == [(0.2, None), (0.2, infer.WIDE_SIZE)]  # the first look, then the wide look
+    assert list(inst.scores) == [0.9, 0.3, 0.6]
     assert list(inst.labels) == ["blade", "blade", "nacelle"]
-    plain = infer.segment_image(img, model=object(), candidate_floor=None)
-    assert asked[-1] == 0.5 and list(plain.scores) == [0.9, 0.6]
+    plain = infer.segment_image(img, model=object(), candidate_floor=None, wide=False)
+    assert asked[-1] == (0.5, None) and list(plain.scores) == [0.9, 0.6]
 
 
 def _png_header_only(w: int, h: int) -> bytes:

@@ -48,7 +48,9 @@ def photo_input(path: str | Path, area_threshold: float | None = None,
     find its contours (``find_contours``, as for an instances JSON). Returns the pitch input (its
     contours or the error that stopped them; the photo as overlay background) and the instances.
     An unreadable file is an InputError. ``fast``: one pass of the network, without the mirror
-    pass and the second look (``segment --no-flip --no-zoom``; ``plan --fast``)."""
+    pass and the second look (``segment --no-flip --no-zoom``; ``plan --fast``). Never the wide
+    look (``segment --no-wide``): it finds a blade filling a close-up's frame, and the photo a
+    plan reads angles from shows a whole rotor."""
     from wtcli.segment import cvnet
     from wtcli.segment.batch import read_image
 
@@ -63,7 +65,7 @@ def photo_input(path: str | Path, area_threshold: float | None = None,
     rec = {"id": 1, "file_name": path.name, "path": str(path), "width": int(img.shape[1]),
            "height": int(img.shape[0])}
     inst = segment_image(img, score_threshold=DEFAULT_SCORE_THRESHOLD,
-                         candidate_floor=candidate_floor, flip=not fast, zoom=not fast)
+                         candidate_floor=candidate_floor, flip=not fast, zoom=not fast, wide=False)
     try:
         cs = require_contours(find_contours(inst, thr, image=rec, source=str(path)))
         return PitchInput(cs, None, rec, (path,), DEFAULT_SCORE_THRESHOLD), inst

@@ -65,7 +65,8 @@ def register(app: typer.Typer) -> None:
         fast: bool = typer.Option(
             True, "--fast/--full",
             help="Photos: one pass of the segmenter (--fast, the default), or --full: also the "
-                 "mirror pass and a second look at a distant turbine (segment's default), four "
+                 "mirror pass and a second look at a distant turbine (segment's defaults but the "
+                 "wide look), four "
                  "passes, about a second later on 2 cores; on 40 held-out renders both read the "
                  "blade angles as well (docs/plan.md)."),
         json_out: bool = typer.Option(False, "--json", help="Print the plan JSON on stdout."),

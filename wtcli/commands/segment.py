@@ -25,6 +25,9 @@ def segment(
     zoom: bool = typer.Option(True, "--zoom/--no-zoom",
                               help="Segment each small (distant) turbine again on a crop around "
                                    "it: its blades come out fuller and its angles truer."),
+    wide: bool = typer.Option(True, "--wide/--no-wide",
+                              help="Look at the photo again smaller, for a part too big for the "
+                                   "first look (a blade filling a close-up's frame)."),
     flip: bool = typer.Option(True, "--flip/--no-flip",
                               help="Detect the photo and its mirror image together (fewer "
                                    "missed blades, truer thin ones; --no-flip: about 2x "
@@ -67,13 +70,14 @@ def segment(
 
     def run(img):  # the segmenter alone: no low-score blades kept for pitch (candidate_floor)
         return segment_image(img, net, score_threshold, max_size, candidate_floor=None, zoom=zoom,
-                             flip=flip, refine=refine, refiner=refiner)
+                             flip=flip, refine=refine, refiner=refiner, wide=wide)
 
     with count_bar("segment", len(files)) as advance:
         results = segment_paths(path, out, run, recursive=recursive, resume=resume,
                                 on_progress=lambda res: advance(f"{res.rel} {res.status}"),
                                 score_threshold=score_threshold)
-    settings = {"score_threshold": score_threshold, "max_size": max_size, "zoom": zoom, "flip": flip,
+    settings = {"score_threshold": score_threshold, "max_size": max_size, "zoom": zoom,
+                "wide": wide, "flip": flip,
                 "model": str(weights), "refiner": str(resolve_refiner(refiner)) if refine else None,
                 "device": str(next(net.parameters()).device), "precision": net.precision}
     report = write_batch_files(out, results, settings)

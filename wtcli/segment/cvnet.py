@@ -140,15 +140,18 @@ class CvModel:
         return 1.0 / (1.0 + np.exp(-0.5 * (lo[:len(f)] + lo[len(f):])))
 
     # -- torchvision's steps in numpy ---------------------------------------------------------
-    def transform(self, image_bgr: np.ndarray) -> tuple[np.ndarray, tuple[int, int]]:
+    def transform(self, image_bgr: np.ndarray, size: tuple[int, int] | None = None
+                  ) -> tuple[np.ndarray, tuple[int, int]]:
         """GeneralizedRCNNTransform: RGB in [0, 1], normalised, resized so the shorter side is
-        ``min_size`` (the longer at most ``max_size``; bilinear, as torch's interpolate), padded
-        with zeros to a multiple of 32. Returns the tensor and the resized (h, w)."""
+        ``min_size`` (the longer at most ``max_size``; bilinear, as torch's interpolate; or
+        ``size`` = (shorter, longer at most)), padded with zeros to a multiple of 32. Returns
+        the tensor and the resized (h, w)."""
         m = self.meta
         rgb = image_bgr[:, :, ::-1].astype(np.float32) / 255.0
         rgb = (rgb - np.float32(m["image_mean"])) / np.float32(m["image_std"])
         h, w = rgb.shape[:2]
-        scale = min(m["min_size"] / min(h, w), m["max_size"] / max(h, w))
+        lo, hi = (m["min_size"], m["max_size"]) if size is None else size
+        scale = min(lo / min(h, w), hi / max(h, w))
         nh, nw = math.floor(h * scale), math.floor(w * scale)
         rgb = cv2.resize(rgb, (nw, nh), interpolation=cv2.INTER_LINEAR)
         d = m["size_divisible"]
@@ -251,9 +254,10 @@ class CvModel:
         keep = batched_nms(b, s, lab, m["box_nms_thresh"])[:m["detections_per_img"]]
         return b[keep], s[keep], lab[keep]
 
-    def detect(self, image_bgr: np.ndarray, flip: bool) -> tuple[dict, tuple[int, int]]:
+    def detect(self, image_bgr: np.ndarray, flip: bool, size: tuple[int, int] | None = None
+               ) -> tuple[dict, tuple[int, int]]:
         """As ``infer._detect``: boxes, labels, scores and M x M masks in the working size."""
-        x, hw = self.transform(image_bgr)
+        x, hw = self.transform(image_bgr, size)
         levels, obj, dl = self.dense_pass(x)
         tensor_hw = x.shape[-2:]
         proposals = self.rpn(tensor_hw, hw, obj, dl)
@@ -430,10 +434,11 @@ def chosen() -> bool:
 
 
 def predict(model: CvModel, image_bgr: np.ndarray, score_threshold: float = DEFAULT_SCORE_THRESHOLD,
-            max_size: int | None = DEFAULT_MAX_SIZE, flip: bool = True) -> Instances:
+            max_size: int | None = DEFAULT_MAX_SIZE, flip: bool = True,
+            size: tuple[int, int] | None = None) -> Instances:
     """As ``infer.predict``, with the converted network."""
     img, H, W = post.working_image(image_bgr, score_threshold, max_size)
-    det, hw = model.detect(img, flip)
+    det, hw = model.detect(img, flip, size)
     return post.instances(det["scores"], det["labels"], det["masks"], det["boxes"], hw, H, W,
                           score_threshold, model.mask_offset_px)
 
@@ -441,16 +446,20 @@ def predict(model: CvModel, image_bgr: np.ndarray, score_threshold: float = DEFA
 def segment_image(image_bgr: np.ndarray, score_threshold: float = DEFAULT_SCORE_THRESHOLD,
                   max_size: int | None = DEFAULT_MAX_SIZE,
                   candidate_floor: float | None = CANDIDATE_FLOOR, zoom: bool = True,
-                  flip: bool = True, refine: bool = True) -> Instances:
+                  flip: bool = True, refine: bool = True, wide: bool = True) -> Instances:
     """As ``infer.segment_image`` with the shipped model and refiner, converted: the
-    instances scoring ``score_threshold`` and the blades scoring ``candidate_floor``; ``zoom``
-    (the second look), ``flip`` (the mirror pass) and ``refine`` (the edge refiner) as
-    there."""
+    instances scoring ``score_threshold`` and the blades scoring ``candidate_floor``; ``wide``
+    (the wide look), ``zoom`` (the second look), ``flip`` (the mirror pass) and ``refine``
+    (the edge refiner) as there."""
     from wtcli.segment.edges import refine_edges
 
     model = load()
     floor = score_threshold if candidate_floor is None else min(candidate_floor, score_threshold)
     inst = predict(model, image_bgr, floor, max_size, flip)
+    if wide:
+        inst = post.wide_look(lambda img, thr, ms, fl: predict(model, img, thr, ms, fl,
+                                                               size=post.WIDE_SIZE),
+                              image_bgr, inst, floor, max_size, flip, sure=score_threshold)
     if zoom:
         inst = post.second_look(lambda img, thr, ms, fl: predict(model, img, thr, ms, fl),
                                 image_bgr, inst, floor, max_size, flip)

@@ -12,6 +12,7 @@ are detected together: proposals, class scores, boxes and masks of both passes a
 
 from __future__ import annotations
 
+import copy
 import threading
 from pathlib import Path
 
@@ -31,7 +32,8 @@ from wtcli.segment.data import image_tensor
 from wtcli.segment.defaults import CANDIDATE_FLOOR, DEFAULT_MAX_SIZE, DEFAULT_SCORE_THRESHOLD
 # shared with the torch-free path (wtcli.segment.cvnet); the names stay importable from here
 from wtcli.segment.post import (DUPLICATE_INSIDE, MASK_OFFSET_PX, MASK_THRESHOLD,  # noqa: F401
-                                MIRROR_BOX_SHIFT_PX, SMALL_TURBINE, ZOOM_MAX, ZOOM_MIN_CROP, ZOOM_PAD,
+                                MIRROR_BOX_SHIFT_PX, SMALL_TURBINE, WIDE_SIZE, ZOOM_MAX, ZOOM_MIN_CROP,
+                                ZOOM_PAD,
                                 _turbine_groups, drop_duplicate_blades, instances, paste_mask,
                                 working_image)
 
@@ -72,28 +74,36 @@ def _device_of(model: torch.nn.Module) -> torch.device:
 
 
 def predict(model: torch.nn.Module, image_bgr: np.ndarray, score_threshold: float = DEFAULT_SCORE_THRESHOLD,
-            max_size: int | None = DEFAULT_MAX_SIZE, device=None, flip: bool = True) -> Instances:
+            max_size: int | None = DEFAULT_MAX_SIZE, device=None, flip: bool = True,
+            size: tuple[int, int] | None = None) -> Instances:
     """Instances (labels, masks at the image's size, scores, boxes xyxy) with score >= threshold.
 
     ``flip``: detect the photo and its mirror image together (``_detect_both``); about 2 x
     the time. On 300 development renders (an earlier model, second look) blade / tower /
-    nacelle IoU 0.757 / 0.855 / 0.768 without -> 0.774 / 0.867 / 0.778 with."""
+    nacelle IoU 0.757 / 0.855 / 0.768 without -> 0.774 / 0.867 / 0.778 with. ``size``: the
+    network's working size (shorter side, longer side at most) instead of its own."""
     img, H, W = working_image(image_bgr, score_threshold, max_size)
     dev = _device_of(model) if device is None else torch.device(device)
     model.eval()
     with torch.inference_mode():
-        det, hw = _detect(model, image_tensor(img).to(dev), flip)
+        det, hw = _detect(model, image_tensor(img).to(dev), flip, size)
     return instances(det["scores"].float().cpu().numpy(), det["labels"].cpu().numpy(),
                      det["masks"][:, 0].float().cpu().numpy(), det["boxes"].float().cpu().numpy(),
                      hw, H, W, score_threshold, float(getattr(model, "mask_offset_px", MASK_OFFSET_PX)))
 
 
-def _detect(model, x: torch.Tensor, flip: bool = False) -> tuple[dict, tuple[int, int]]:
+def _detect(model, x: torch.Tensor, flip: bool = False, size: tuple[int, int] | None = None
+            ) -> tuple[dict, tuple[int, int]]:
     """The network's detections for one image tensor, in the network's working size
-    (image resized by its transform), with the masks still M x M per box: torchvision's own
-    postprocess pastes them half a pixel to a pixel off (see ``paste_mask``). ``flip``: the
-    photo and its mirror image detected together (``_detect_both``)."""
-    images, _ = model.transform([x])
+    (image resized by its transform, or to ``size``), with the masks still M x M per box:
+    torchvision's own postprocess pastes them half a pixel to a pixel off (see
+    ``paste_mask``). ``flip``: the photo and its mirror image detected together
+    (``_detect_both``)."""
+    transform = model.transform
+    if size is not None:  # a copy: the cached model is shared between threads
+        transform = copy.copy(transform)
+        transform.min_size, transform.max_size = (int(size[0]),), int(size[1])
+    images, _ = transform([x])
     feats = model.backbone(images.tensors)
     if flip:
         return _detect_both(model, images, feats), tuple(images.image_sizes[0])
@@ -201,8 +211,8 @@ def segment_image(image_bgr: np.ndarray, model: torch.nn.Module | None = None,
                   score_threshold: float = DEFAULT_SCORE_THRESHOLD, max_size: int | None = DEFAULT_MAX_SIZE,
                   device: str | None = None, weights: str | Path | None = None,
                   candidate_floor: float | None = CANDIDATE_FLOOR, zoom: bool = True,
-                  flip: bool = True, refine: bool = True, refiner: str | Path | None = None
-                  ) -> Instances:
+                  flip: bool = True, refine: bool = True, refiner: str | Path | None = None,
+                  wide: bool = True) -> Instances:
     """The one call other stages use: segment a BGR photo with the shipped model (loaded lazily
     and cached) or the ``model`` given.
 
@@ -213,12 +223,15 @@ def segment_image(image_bgr: np.ndarray, model: torch.nn.Module | None = None,
     without ``zoom`` it is the same as predicting at that threshold (duplicates are dropped
     greedily by score). ``zoom``: small turbines get a ``second_look`` (at the lower threshold,
     as ``segment --score-threshold 0.2`` does, so files chain to the same result). ``flip``: as
-    ``predict``'s. ``refine``: the masks' edges decided again by the edge refiner
-    (``wtcli.segment.refine``; ``refiner``: its weights, default the shipped ones)."""
+    ``predict``'s. ``wide``: the photo looked at again smaller, for a part too big for the
+    first look (``post.wide_look``). ``refine``: the masks' edges decided again by the edge
+    refiner (``wtcli.segment.refine``; ``refiner``: its weights, default the shipped ones)."""
     if model is None:
         model = load_model(weights, device)
     floor = score_threshold if candidate_floor is None else min(candidate_floor, score_threshold)
     inst = predict(model, image_bgr, floor, max_size, flip=flip)
+    if wide:
+        inst = wide_look(model, image_bgr, inst, floor, max_size, flip, sure=score_threshold)
     if zoom:
         inst = second_look(model, image_bgr, inst, floor, max_size, flip)
     inst = post.absorb_tip_nacelles(inst, score_threshold)
@@ -255,3 +268,12 @@ def overlay(image_bgr: np.ndarray, inst: Instances, alpha: float = 0.45) -> np.n
         cv2.putText(out, f"{label} {inst.scores[i]:.2f}", (x0 + 2, max(12, y0 + 12)),
                     cv2.FONT_HERSHEY_SIMPLEX, 0.4 * thick, COLORS[label], thick, cv2.LINE_AA)
     return out
+
+
+def wide_look(model: torch.nn.Module, image_bgr: np.ndarray, inst: Instances,
+              score_threshold: float, max_size: int | None = DEFAULT_MAX_SIZE,
+              flip: bool = True, sure: float | None = None) -> Instances:
+    """``post.wide_look`` with this network's ``predict`` at ``WIDE_SIZE``: a part too big
+    for the first look (a blade filling the frame) found on the photo seen smaller."""
+    return post.wide_look(lambda img, thr, ms, fl: predict(model, img, thr, ms, flip=fl, size=WIDE_SIZE),
+                          image_bgr, inst, score_threshold, max_size, flip, sure)

@@ -41,6 +41,16 @@ ZOOM_PAD = 0.6
 # 0.754 (0.7), tower 0.802 -> 0.804. Each look costs one pass whatever the crop's size.
 ZOOM_MIN_CROP = 0.75
 ZOOM_MAX = 3  # the largest this many small turbines (each look costs a pass of the network)
+# Wide look (``wide_look``): the photo again at the smallest size the network trained at (its
+# shorter side WIDE_SIZE[0], longer at most WIDE_SIZE[1]; ``model.TRAIN_MIN_SIZES[0]``,
+# ``TRAIN_MAX_SIZE``). Its detections whose box spans WIDE_BIG of the photo's width or height
+# or more are ones the first look, at 576 px, sees larger than its largest anchors
+# (``model.build_model``: 320 px, 554 px at 1:3) and can miss: a blade filling the frame.
+WIDE_SIZE = (320, 555)
+WIDE_BIG = 0.6
+WIDE_SAME = 0.5  # a first-look instance of the class with this mask IoU already is the big one
+WIDE_INSIDE = 0.5  # a first-look detection this much inside the big one is a piece of it
+WIDE_COVERED = 0.8  # the first look has the big one when its sure detections of the class cover this much
 
 
 def working_image(image_bgr: np.ndarray, score_threshold: float, max_size: int | None
@@ -296,3 +306,71 @@ def second_look(look: Callable[..., Instances], image_bgr: np.ndarray, inst: Ins
     return drop_duplicate_blades(Instances(np.concatenate(labels)[order], np.concatenate(masks)[order],
                                            scores_a[order], np.concatenate(boxes)[order]))
 
+
+
+def _mask_iou_inside(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """(IoU of masks a and b, share of b's pixels inside a)."""
+    both = int(np.count_nonzero(a & b))
+    nb = int(np.count_nonzero(b))
+    union = int(np.count_nonzero(a)) + nb - both
+    return (both / union if union else 0.0), (both / nb if nb else 0.0)
+
+
+def wide_look(look: Callable[..., Instances], image_bgr: np.ndarray, inst: Instances,
+              score_threshold: float, max_size: int | None = DEFAULT_MAX_SIZE,
+              flip: bool = True, sure: float | None = None) -> Instances:
+    """``look(photo, score_threshold, max_size, flip)``: the network's instances with the photo
+    at WIDE_SIZE. Adds what only that look finds: a part too big for the first look.
+
+    The network's largest anchors are 320 px (554 x 185 px at 1:3) at its 576 px working size,
+    so a blade filling the frame of a close-up (the photos an inspection takes) gets no
+    proposal that fits it, and the first look finds nothing, or its end as a "nacelle", or an
+    edge as a "tower". Seen at the size the network first trained at, the same blade fits.
+    A wide-look detection whose box spans WIDE_BIG of the photo's width or height and that
+    scores ``sure`` (``segment``'s reporting threshold; default ``score_threshold``) or more
+    joins the first look's, best score first, and the first
+    look's detections that are it (its class, a mask IoU of WIDE_SAME) or pieces of it (any
+    class, WIDE_INSIDE or more of their mask within it) and score lower go; unless the first
+    look, finer, has it already: one of its class scoring higher is it or a piece of it, or
+    its detections of the class scoring ``sure`` cover WIDE_COVERED of it (two blades
+    meeting at a hub, told apart)."""
+    img = np.asarray(image_bgr)
+    H, W = img.shape[:2]
+    wide = look(img, score_threshold, max_size, flip)
+    if not len(wide):
+        return inst
+    b = wide.boxes
+    sure = score_threshold if sure is None else sure
+    big = np.nonzero((((b[:, 2] - b[:, 0]) >= WIDE_BIG * W) | ((b[:, 3] - b[:, 1]) >= WIDE_BIG * H))
+                     & (wide.scores >= sure))[0]
+    if not len(big):
+        return inst
+    keep = np.ones(len(inst), bool)
+    added = []
+    for i in big[np.argsort(-wide.scores[big], kind="stable")]:
+        m, label = wide.masks[i], wide.labels[i]
+        if not m.any():
+            continue
+        theirs = np.nonzero(keep & (inst.labels == label) & (inst.scores >= sure))[0]
+        if len(theirs) and np.count_nonzero(m & inst.masks[theirs].any(axis=0)) >= \
+                WIDE_COVERED * np.count_nonzero(m):
+            continue
+        pieces, surer = [], False
+        for j in np.nonzero(keep)[0]:
+            iou, inside = _mask_iou_inside(m, inst.masks[j])
+            mine = inst.labels[j] == label
+            if inside >= WIDE_INSIDE or (mine and iou >= WIDE_SAME):
+                pieces.append(j)
+                surer |= bool(mine and inst.scores[j] > wide.scores[i])
+        if surer:
+            continue
+        keep[[j for j in pieces if inst.scores[j] <= wide.scores[i]]] = False
+        added.append(i)
+    if not added:
+        return inst
+    scores = np.concatenate([inst.scores[keep], wide.scores[added]])
+    order = np.argsort(-scores, kind="stable")  # as predict's: best first
+    return drop_duplicate_blades(Instances(
+        np.concatenate([inst.labels[keep], wide.labels[added]])[order],
+        np.concatenate([inst.masks[keep], wide.masks[added]])[order], scores[order],
+        np.concatenate([inst.boxes[keep], wide.boxes[added]])[order]))
