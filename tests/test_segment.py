@@ -561,8 +561,10 @@ def test_the_wide_look_adds_a_blade_too_big_for_the_first_look_and_drops_its_pie
     (its tip read as a nacelle, an edge as a tower, a weaker copy of it) go; it does not join
     where the first look has it surer, or split it into surer blades (two meeting at a hub),
     nor when it is small (the first look sees those as well) or doubtful."""
-    from wtcli.segment.post import wide_look
+    from wtcli.segment.model import TRAIN_MAX_SIZE, TRAIN_MIN_SIZES
+    from wtcli.segment.post import WIDE_SIZE, wide_look
 
+    assert WIDE_SIZE == (TRAIN_MIN_SIZES[0], TRAIN_MAX_SIZE)  # the smallest size it trained at
     h, w = 120, 200
     big = _rect(h, w, 0, 180, 20, 100)
 
