@@ -13,7 +13,7 @@ import torch
 
 from wtcli.errors import ExitCode, InputError, ModelError
 from wtcli.masks import LABELS, Instances, read_instances
-from wtcli.segment import batch, infer
+from wtcli.segment import batch, infer, post
 from wtcli.segment.evaluate import Evaluator, average_precision, mask_iou
 from wtcli.segment.model import ARCH, build_model, load_weights, save_weights
 
@@ -517,6 +517,29 @@ def test_duplicate_blade_inside_a_better_one_is_dropped():
     assert hi.scores.tolist() == [s for s in out.scores.tolist() if s >= 0.75]
     # A blade less than the threshold inside another stays.
     assert len(infer.drop_duplicate_blades(inst, inside=0.8)) == 4
+
+
+def test_one_region_read_as_two_classes_keeps_the_better_scored_reading():
+    shape = (120, 200)
+    blade = _blade_bar(shape, 90, 0, 110, 120)  # a blade close-up across the frame
+    tower_copy = _blade_bar(shape, 88, 5, 110, 120)  # the same region read as a tower: IoU 0.87
+    tower = _blade_bar(shape, 20, 40, 36, 120)  # another turbine's tower beside it
+    over = _blade_bar(shape, 22, 40, 34, 70)  # a blade over that tower: IoU 0.28, not the same
+    nacelle = _blade_bar(shape, 85, 0, 115, 12)  # a nacelle where the blade starts: IoU 0.1
+    masks = np.stack([tower_copy, blade, tower, over, nacelle])
+    inst = Instances(np.array(["tower", "blade", "tower", "blade", "nacelle"], dtype=object), masks,
+                     np.array([0.77, 0.89, 0.95, 0.6, 0.7]))
+    out = post.drop_duplicates(inst)
+    assert list(out.labels) == ["blade", "tower", "blade", "nacelle"]
+    assert out.scores.tolist() == [0.89, 0.95, 0.6, 0.7]
+    # the better-scored reading wins whichever class it is, and whatever the order
+    flipped = Instances(inst.labels, masks, np.array([0.95, 0.89, 0.95, 0.6, 0.7]))
+    assert list(post.drop_duplicates(flipped[[4, 3, 2, 1, 0]]).labels) == ["nacelle", "blade", "tower", "tower"]
+    # greedy by score: the result at a higher threshold is this one, thresholded
+    hi = post.drop_duplicates(inst[inst.scores >= 0.75])
+    assert hi.scores.tolist() == [s for s in out.scores.tolist() if s >= 0.75]
+    # under the IoU asked for, both readings stay
+    assert len(post.drop_duplicates(inst, same=0.9)) == 5
 
 
 def _rect(h, w, x0, x1, y0, y1):

@@ -24,6 +24,7 @@ MIRROR_BOX_SHIFT_PX = 0.5  # see unmirror_boxes
 # at 0.5.
 MASK_THRESHOLD = {"blade": 0.45, "tower": 0.5, "nacelle": 0.5}
 DUPLICATE_INSIDE = 0.3  # a blade this much inside a better-scored blade is the same blade
+SAME_REGION_IOU = 0.7  # two classes' masks this alike are one part read twice (``drop_duplicates``)
 # ``absorb_tip_nacelles``: a lone blade's end read as a nacelle lies on the blade's axis (its
 # middle within this share of the blade's width there) and is at most this much wider.
 NACELLE_IN_LINE = 0.5
@@ -89,7 +90,7 @@ def instances(scores: np.ndarray, labels: np.ndarray, soft: np.ndarray, work_box
         paste_mask(masks[i], m, work_boxes[i], sx, sy, offset, MASK_THRESHOLD[names[i]])
     boxes[:, [0, 2]] = boxes[:, [0, 2]].clip(0, W)
     boxes[:, [1, 3]] = boxes[:, [1, 3]].clip(0, H)
-    return drop_duplicate_blades(Instances(names, masks, scores[keep].clip(0, 1), boxes))
+    return drop_duplicates(Instances(names, masks, scores[keep].clip(0, 1), boxes))
 
 
 def _axis(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -198,6 +199,47 @@ def drop_duplicate_blades(inst: Instances, inside: float = DUPLICATE_INSIDE) -> 
 
 
 
+def drop_duplicates(inst: Instances, inside: float = DUPLICATE_INSIDE,
+                    same: float | None = None) -> Instances:
+    """``drop_duplicate_blades``, after dropping each detection whose mask has an IoU of
+    ``same`` or more with a better-scored one's of another class: box NMS is per class, so one
+    part can come out twice (a blade close-up also as a "tower", a tower behind a blade also
+    as a blade), and a pixel shows one part. Parts of different classes meet or overlap at an
+    edge (a blade over the tower, a nacelle at the blade roots) but are not the same region.
+    Greedy by score, so the result at any score threshold is this one, thresholded.
+    ``same``: default SAME_REGION_IOU."""
+    same = SAME_REGION_IOU if same is None else same
+    n = len(inst)
+    if n >= 2 and len(set(inst.labels)) > 1:
+        order = np.argsort(-inst.scores, kind="stable")
+        area = inst.masks.reshape(n, -1).sum(axis=1)
+        kept: list[int] = []
+        drop = []
+        for i in order:
+            x0, y0, x1, y1 = inst.boxes[i]
+            dup = False
+            for j in kept:
+                if inst.labels[j] == inst.labels[i]:
+                    continue
+                u0, v0 = int(max(x0, inst.boxes[j][0])), int(max(y0, inst.boxes[j][1]))
+                u1 = int(np.ceil(min(x1, inst.boxes[j][2])))
+                v1 = int(np.ceil(min(y1, inst.boxes[j][3])))
+                if u1 <= u0 or v1 <= v0:
+                    continue  # the masks can overlap only where the boxes do
+                both = int(np.count_nonzero(inst.masks[i, v0:v1, u0:u1] & inst.masks[j, v0:v1, u0:u1]))
+                union = int(area[i] + area[j]) - both
+                if union and both >= same * union:
+                    dup = True
+                    break
+            if dup:
+                drop.append(i)
+            else:
+                kept.append(i)
+        if drop:
+            inst = inst[np.setdiff1d(np.arange(n), drop)]
+    return drop_duplicate_blades(inst, inside)
+
+
 def paste_mask(out: np.ndarray, soft: np.ndarray, box, sx: float, sy: float,
                offset: float = MASK_OFFSET_PX, threshold: float = 0.5) -> None:
     """Threshold the M x M mask ``soft`` of ``box`` (working-size pixels) at ``threshold``
@@ -303,7 +345,7 @@ def second_look(look: Callable[..., Instances], image_bgr: np.ndarray, inst: Ins
     scores, boxes = [inst.scores[keep]] + scores, [inst.boxes[keep]] + boxes
     scores_a = np.concatenate(scores)
     order = np.argsort(-scores_a, kind="stable")  # as predict's: best first
-    return drop_duplicate_blades(Instances(np.concatenate(labels)[order], np.concatenate(masks)[order],
+    return drop_duplicates(Instances(np.concatenate(labels)[order], np.concatenate(masks)[order],
                                            scores_a[order], np.concatenate(boxes)[order]))
 
 
@@ -370,7 +412,7 @@ def wide_look(look: Callable[..., Instances], image_bgr: np.ndarray, inst: Insta
         return inst
     scores = np.concatenate([inst.scores[keep], wide.scores[added]])
     order = np.argsort(-scores, kind="stable")  # as predict's: best first
-    return drop_duplicate_blades(Instances(
+    return drop_duplicates(Instances(
         np.concatenate([inst.labels[keep], wide.labels[added]])[order],
         np.concatenate([inst.masks[keep], wide.masks[added]])[order], scores[order],
         np.concatenate([inst.boxes[keep], wide.boxes[added]])[order]))
