@@ -123,6 +123,37 @@ SECTIONS: tuple[Section, ...] = (
          F("blade angle θ error on them, mean", ("pooled.theta_error_deg_mean", "pooled.blades_matched"),
            "{:.2f}° ({} blades)", "≤ 1°"))),
     Section(
+        "Segmentation: the wider views, on renders", "segment_views",
+        "python benchmarks/segment_views.py --threads 2",
+        "The shipped segmenter, as `segment` runs it, on the renderer's wider views (docs/synth.md): "
+        "20 renders of each at 768 × 576 that no run saw (seeds 9 600 000 +). IoU of each class's "
+        "union mask against the renderer's labels, averaged over the renders that have the class; "
+        "\"tower read as blade\": the share of the true tower's pixels under a blade instance, and "
+        "the renders where that is 10 % or more.",
+        (F("blade close-ups filling the frame: blade IoU", ("per_view.closeup.blade_iou",), "{:.3f}"),
+         F("nadir and steep-down views: blade / tower / nacelle IoU",
+           ("per_view.nadir.blade_iou", "per_view.nadir.tower_iou", "per_view.nadir.nacelle_iou"),
+           "{:.3f} / {:.3f} / {:.3f}"),
+         F("nadir: the tower read as blade (share of its pixels; renders with 10 % or more)",
+           ("per_view.nadir.tower_as_blade", "per_view.nadir.tower_as_blade_renders",
+            "per_view.nadir.renders_with_tower"), "{:.1%}; {:.0%} of {}", "none"),
+         F("close hub views from above: blade / tower / nacelle IoU",
+           ("per_view.hub.blade_iou", "per_view.hub.tower_iou", "per_view.hub.nacelle_iou"),
+           "{:.3f} / {:.3f} / {:.3f}"),
+         F("frames cutting the nacelle, hub and blade ends: blade / tower / nacelle IoU",
+           ("per_view.cut.blade_iou", "per_view.cut.tower_iou", "per_view.cut.nacelle_iou"),
+           "{:.3f} / {:.3f} / {:.3f}"),
+         F("side-on broad blades: blade / tower IoU",
+           ("per_view.broadside.blade_iou", "per_view.broadside.tower_iou"), "{:.3f} / {:.3f}"),
+         F("a blade in front of the tower: blade / tower IoU; the blade read as tower",
+           ("per_view.overtower.blade_iou", "per_view.overtower.tower_iou",
+            "per_view.overtower.blade_as_tower"), "{:.3f} / {:.3f}; {:.1%}"),
+         F("distant turbines among distractors: blade / tower IoU",
+           ("per_view.distant.blade_iou", "per_view.distant.tower_iou"), "{:.3f} / {:.3f}"),
+         F("all of them: blade / tower / nacelle IoU",
+           ("pooled.blade_iou", "pooled.tower_iou", "pooled.nacelle_iou", "pooled.renders"),
+           "{:.3f} / {:.3f} / {:.3f} ({} renders)"))),
+    Section(
         "Segmentation: speed", "segment_accuracy",
         "python benchmarks/segment_accuracy.py --threads 2",
         "One 1024 × 683 render, images per second in one process with the same thread count, "
