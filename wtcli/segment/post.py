@@ -198,7 +198,6 @@ def drop_duplicate_blades(inst: Instances, inside: float = DUPLICATE_INSIDE) -> 
     return inst[np.setdiff1d(np.arange(len(inst)), drop)]
 
 
-
 def drop_duplicates(inst: Instances, inside: float = DUPLICATE_INSIDE,
                     same: float | None = None) -> Instances:
     """``drop_duplicate_blades``, after dropping each detection whose mask has an IoU of
@@ -346,7 +345,7 @@ def second_look(look: Callable[..., Instances], image_bgr: np.ndarray, inst: Ins
     scores_a = np.concatenate(scores)
     order = np.argsort(-scores_a, kind="stable")  # as predict's: best first
     return drop_duplicates(Instances(np.concatenate(labels)[order], np.concatenate(masks)[order],
-                                           scores_a[order], np.concatenate(boxes)[order]))
+                                     scores_a[order], np.concatenate(boxes)[order]))
 
 
 
