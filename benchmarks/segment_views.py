@@ -38,6 +38,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _results import save  # noqa: E402  (figures with the command, date and machine)
+from segment_real import iou  # noqa: E402  (the real photos' IoU, the same measure)
 
 SEED_BASE = 9_600_000
 WIDTH, HEIGHT = 768, 576
@@ -50,11 +51,6 @@ def _union(inst, labels: tuple[str, ...]) -> np.ndarray:
     return inst.masks[keep].any(axis=0) if keep.any() else np.zeros(inst.image_size, bool)
 
 
-def _iou(a: np.ndarray, b: np.ndarray) -> float | None:
-    u = np.count_nonzero(a | b)
-    return float(np.count_nonzero(a & b) / u) if u else None
-
-
 def _share(part: np.ndarray, whole: np.ndarray) -> float | None:
     n = np.count_nonzero(whole)
     return float(np.count_nonzero(part & whole) / n) if n else None
@@ -64,7 +60,7 @@ def measure(inst, truth) -> dict:
     """One render's figures: IoU per class, tower read as blade, blade read as tower."""
     pb, pt, pn = _union(inst, ("blade",)), _union(inst, ("tower",)), _union(inst, ("nacelle",))
     tb, tt, tn = (truth.of(c).union() for c in ("blade", "tower", "nacelle"))
-    return {"blade_iou": _iou(pb, tb), "tower_iou": _iou(pt, tt), "nacelle_iou": _iou(pn, tn),
+    return {"blade_iou": iou(pb, tb), "tower_iou": iou(pt, tt), "nacelle_iou": iou(pn, tn),
             "tower_as_blade": _share(pb, tt), "blade_as_tower": _share(pt | pn, tb)}
 
 

@@ -164,6 +164,17 @@ def absorb_tip_nacelles(inst: Instances, score_threshold: float) -> Instances:
     return Instances(inst.labels[keep], masks[keep], inst.scores[keep], boxes[keep])
 
 
+def _shared_pixels(inst: Instances, i: int, j: int) -> int:
+    """Pixels in both instance i's and j's masks, counted where their boxes meet (a detection's
+    mask lies inside its box)."""
+    u0, v0 = int(max(inst.boxes[i][0], inst.boxes[j][0])), int(max(inst.boxes[i][1], inst.boxes[j][1]))
+    u1 = int(np.ceil(min(inst.boxes[i][2], inst.boxes[j][2])))
+    v1 = int(np.ceil(min(inst.boxes[i][3], inst.boxes[j][3])))
+    if u1 <= u0 or v1 <= v0:
+        return 0
+    return int(np.count_nonzero(inst.masks[i, v0:v1, u0:u1] & inst.masks[j, v0:v1, u0:u1]))
+
+
 def drop_duplicate_blades(inst: Instances, inside: float = DUPLICATE_INSIDE) -> Instances:
     """Drop a blade detection whose mask lies ``inside`` (share of its pixels) or more within a
     better-scored blade's: the network sometimes proposes a blade twice (whole and a part, two
@@ -178,17 +189,11 @@ def drop_duplicate_blades(inst: Instances, inside: float = DUPLICATE_INSIDE) -> 
     kept: list[int] = []
     drop = []
     for a, i in enumerate(idx):
-        x0, y0, x1, y1 = inst.boxes[i]
         dup = area[a] == 0
         for b in kept:
             if dup:
                 break
-            j = idx[b]  # the masks can overlap only where the boxes do
-            u0, v0 = int(max(x0, inst.boxes[j][0])), int(max(y0, inst.boxes[j][1]))
-            u1, v1 = int(np.ceil(min(x1, inst.boxes[j][2]))), int(np.ceil(min(y1, inst.boxes[j][3])))
-            if u1 > u0 and v1 > v0:
-                both = inst.masks[i, v0:v1, u0:u1] & inst.masks[j, v0:v1, u0:u1]
-                dup = int(both.sum()) >= inside * area[a]
+            dup = _shared_pixels(inst, i, idx[b]) >= inside * area[a]
         if dup:
             drop.append(i)
         else:
@@ -215,17 +220,11 @@ def drop_duplicates(inst: Instances, inside: float = DUPLICATE_INSIDE,
         kept: list[int] = []
         drop = []
         for i in order:
-            x0, y0, x1, y1 = inst.boxes[i]
             dup = False
             for j in kept:
                 if inst.labels[j] == inst.labels[i]:
                     continue
-                u0, v0 = int(max(x0, inst.boxes[j][0])), int(max(y0, inst.boxes[j][1]))
-                u1 = int(np.ceil(min(x1, inst.boxes[j][2])))
-                v1 = int(np.ceil(min(y1, inst.boxes[j][3])))
-                if u1 <= u0 or v1 <= v0:
-                    continue  # the masks can overlap only where the boxes do
-                both = int(np.count_nonzero(inst.masks[i, v0:v1, u0:u1] & inst.masks[j, v0:v1, u0:u1]))
+                both = _shared_pixels(inst, i, j)
                 union = int(area[i] + area[j]) - both
                 if union and both >= same * union:
                     dup = True
