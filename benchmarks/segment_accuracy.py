@@ -70,7 +70,7 @@ from wtcli.segment.data import DEV_SEED_BASE, HELDOUT_SEED_BASE, image_tensor  #
 from wtcli.segment.evaluate import Evaluator, mask_iou  # noqa: E402
 from wtcli.pitch import CANDIDATE_FLOOR, DEFAULT_SCORE_THRESHOLD  # noqa: E402
 from wtcli.segment.infer import load_model, predict, second_look, wide_look  # noqa: E402
-from wtcli.segment.post import absorb_tip_nacelles  # noqa: E402
+from wtcli.segment.post import absorb_blade_ends  # noqa: E402
 from wtcli.segment.model import resolve_weights  # noqa: E402
 from wtcli.segment.refine import load_refiner, refine_edges, resolve_refiner  # noqa: E402
 
@@ -170,7 +170,7 @@ def synthetic(model, n: int, width: int, height: int, log, max_minutes: float | 
         pred = predict(model, s.image, score_threshold=0.0)
         ev.add(pred, s.instances)
         # What segment_image gives (small turbines looked at again), from the candidate floor up.
-        zpred = absorb_tip_nacelles(looks(model, s.image, pred[pred.scores >= CANDIDATE_FLOOR]), 0.5)
+        zpred = absorb_blade_ends(looks(model, s.image, pred[pred.scores >= CANDIDATE_FLOOR]), 0.5)
         zoom["ev"].add(zpred, s.instances)
         half = render_sample(seed_base + i, width=width, height=height,
                              view="front" if i % 2 == 0 else None, labels="half").instances
@@ -376,7 +376,7 @@ def real_photos(model, root: Path, log, refiner=None) -> dict:
         tower = (pred.of("tower").union() | pred.of("nacelle").union()) if len(pred) else np.zeros(sem.shape, bool)
         blade_iou.append(mask_iou(blade, sem == 1))
         tower_iou.append(mask_iou(tower, sem == 2))
-        zlow = absorb_tip_nacelles(looks(model, img, low), 0.5)
+        zlow = absorb_blade_ends(looks(model, img, low), 0.5)
         zpred = zlow[zlow.scores >= 0.5] if len(zlow) else zlow
         zblade = zpred.of("blade").union() if len(zpred) else np.zeros(sem.shape, bool)
         ztower = (zpred.of("tower").union() | zpred.of("nacelle").union()) if len(zpred) else np.zeros(sem.shape, bool)

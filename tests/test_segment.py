@@ -548,35 +548,84 @@ def _rect(h, w, x0, x1, y0, y1):
     return m
 
 
+def _parts(*parts):
+    """Instances of (label, mask) pairs, every one scoring 0.9."""
+    return Instances(np.array([p[0] for p in parts], object), np.array([p[1] for p in parts]),
+                     np.array([0.9] * len(parts)))
+
+
 def test_a_lone_blades_end_read_as_a_nacelle_joins_the_blade():
     """A "nacelle" on a lone blade's axis beyond its end, no wider than it and on no tower, is
     the blade's tip (tip close-ups); one beside the blade, wider than it, on a tower or where
     two blades meet stays a nacelle, and so does one scoring under the threshold."""
-    from wtcli.segment.post import absorb_tip_nacelles
+    from wtcli.segment.post import absorb_blade_ends
 
     h, w = 120, 200
     blade = _rect(h, w, 0, 150, 50, 70)  # a blade from the frame's left edge, 20 px wide
     tip = _rect(h, w, 145, 172, 49, 71)
 
-    def inst(*parts):
-        return Instances(np.array([p[0] for p in parts], object), np.array([p[1] for p in parts]),
-                         np.array([0.9] * len(parts)))
-
-    out = absorb_tip_nacelles(inst(("blade", blade), ("nacelle", tip)), 0.5)
+    out = absorb_blade_ends(_parts(("blade", blade), ("nacelle", tip)), 0.5)
     assert list(out.labels) == ["blade"] and out.masks[0].sum() == (blade | tip).sum()
-    doubtful = inst(("blade", blade), ("nacelle", tip))
+    doubtful = _parts(("blade", blade), ("nacelle", tip))
     doubtful = Instances(doubtful.labels, doubtful.masks, np.array([0.9, 0.4]))
-    assert list(absorb_tip_nacelles(doubtful, 0.5).labels) == ["blade", "nacelle"]
+    assert list(absorb_blade_ends(doubtful, 0.5).labels) == ["blade", "nacelle"]
     assert out.boxes[0].tolist() == [0, 49, 172, 71]
     kept = [
-        inst(("blade", blade), ("nacelle", tip), ("tower", _rect(h, w, 150, 170, 71, 120))),
-        inst(("blade", blade), ("nacelle", _rect(h, w, 145, 200, 35, 85))),  # wider than the blade
-        inst(("blade", blade), ("nacelle", _rect(h, w, 100, 140, 70, 90))),  # beside it
-        inst(("blade", blade), ("nacelle", tip), ("blade", _rect(h, w, 165, 175, 0, 50))),
-        inst(("blade", _rect(h, w, 30, 180, 50, 70)), ("nacelle", _rect(h, w, 0, 35, 49, 71))),  # cut
+        _parts(("blade", blade), ("nacelle", tip), ("tower", _rect(h, w, 150, 170, 71, 120))),
+        _parts(("blade", blade), ("nacelle", _rect(h, w, 145, 190, 35, 85))),  # wider than the blade
+        _parts(("blade", blade), ("nacelle", _rect(h, w, 100, 140, 70, 90))),  # beside it
+        _parts(("blade", blade), ("nacelle", tip), ("blade", _rect(h, w, 165, 175, 0, 50))),
+        _parts(("blade", _rect(h, w, 30, 180, 50, 70)), ("nacelle", _rect(h, w, 0, 35, 49, 71))),  # cut
+        # within a mask's few pixels of error (0.5 % of the longer side, here 2 px) of the edge
+        _parts(("blade", _rect(h, w, 0, 180, 50, 70)), ("nacelle", _rect(h, w, 175, 199, 49, 71))),
     ]
     for case in kept:
-        assert list(absorb_tip_nacelles(case, 0.5).labels) == list(case.labels)
+        assert list(absorb_blade_ends(case, 0.5).labels) == list(case.labels)
+
+
+def test_a_lone_blades_end_read_as_a_short_tower_joins_the_blade():
+    """A "tower" across a lone blade's end (a tip's bright rim), no longer along the blade than
+    across it, is the blade's end; a tower running on in line with a blade (a blade pointing up
+    from the hub, its tower below) and one under a nacelle stay towers."""
+    from wtcli.segment.post import absorb_blade_ends
+
+    h, w = 120, 300
+    blade = _rect(h, w, 0, 150, 50, 70)
+
+    rim = _rect(h, w, 149, 157, 48, 72)
+    out = absorb_blade_ends(_parts(("blade", blade), ("tower", rim)), 0.5)
+    assert list(out.labels) == ["blade"] and out.masks[0].sum() == (blade | rim).sum()
+    kept = [
+        _parts(("blade", blade), ("tower", _rect(h, w, 150, 260, 48, 72))),  # in line, long
+        _parts(("blade", blade), ("tower", rim), ("nacelle", _rect(h, w, 157, 190, 45, 75))),
+        _parts(("blade", blade), ("tower", _rect(h, w, 149, 157, 48, 72)),
+             ("blade", _rect(h, w, 150, 160, 0, 49))),  # where two blades meet
+    ]
+    for case in kept:
+        assert list(absorb_blade_ends(case, 0.5).labels) == list(case.labels)
+
+
+def test_a_blades_end_read_apart_from_a_blade_that_stops_short_joins_it_with_the_gap():
+    """The network's blade can stop short of the tip it read as a nacelle: a piece in line
+    beyond the blade's end by at most the blade's width joins it, the gap with it; farther off,
+    or beyond a blade's end where another blade also ends, it stays what it was read as."""
+    from wtcli.segment.post import absorb_blade_ends
+
+    h, w = 120, 300
+    blade = _rect(h, w, 0, 150, 50, 70)  # 20 px wide
+
+    out = absorb_blade_ends(_parts(("blade", blade), ("nacelle", _rect(h, w, 165, 190, 50, 70))), 0.5)
+    assert list(out.labels) == ["blade"]
+    assert out.masks[0][50:70, 0:190].all() and out.masks[0].sum() == 190 * 20
+    assert out.boxes[0].tolist() == [0, 50, 190, 70]
+    kept = [
+        _parts(("blade", blade), ("nacelle", _rect(h, w, 175, 200, 50, 70))),  # 25 px beyond
+        _parts(("blade", blade), ("nacelle", _rect(h, w, 165, 190, 80, 100))),  # not in line
+        _parts(("blade", blade), ("nacelle", _rect(h, w, 165, 190, 50, 70)),
+             ("blade", _rect(h, w, 165, 190, 75, 119))),  # a second blade, ending by it too
+    ]
+    for case in kept:
+        assert list(absorb_blade_ends(case, 0.5).labels) == list(case.labels)
 
 
 def test_the_wide_look_adds_a_blade_too_big_for_the_first_look_and_drops_its_pieces():

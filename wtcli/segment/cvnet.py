@@ -463,7 +463,7 @@ def segment_image(image_bgr: np.ndarray, score_threshold: float = DEFAULT_SCORE_
     if zoom:
         inst = post.second_look(lambda img, thr, ms, fl: predict(model, img, thr, ms, fl),
                                 image_bgr, inst, floor, max_size, flip)
-    inst = post.absorb_tip_nacelles(inst, score_threshold)
+    inst = post.absorb_blade_ends(inst, score_threshold)
     if refine:
         inst = refine_edges(model.refiner_probability, image_bgr, inst)
     if not len(inst) or floor >= score_threshold:

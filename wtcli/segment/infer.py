@@ -234,7 +234,7 @@ def segment_image(image_bgr: np.ndarray, model: torch.nn.Module | None = None,
         inst = wide_look(model, image_bgr, inst, floor, max_size, flip, sure=score_threshold)
     if zoom:
         inst = second_look(model, image_bgr, inst, floor, max_size, flip)
-    inst = post.absorb_tip_nacelles(inst, score_threshold)
+    inst = post.absorb_blade_ends(inst, score_threshold)
     if refine:
         from wtcli.segment.refine import load_refiner, refine_edges
 

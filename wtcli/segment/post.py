@@ -25,10 +25,11 @@ MIRROR_BOX_SHIFT_PX = 0.5  # see unmirror_boxes
 MASK_THRESHOLD = {"blade": 0.45, "tower": 0.5, "nacelle": 0.5}
 DUPLICATE_INSIDE = 0.3  # a blade this much inside a better-scored blade is the same blade
 SAME_REGION_IOU = 0.7  # two classes' masks this alike are one part read twice (``drop_duplicates``)
-# ``absorb_tip_nacelles``: a lone blade's end read as a nacelle lies on the blade's axis (its
-# middle within this share of the blade's width there) and is at most this much wider.
+# ``absorb_blade_ends``: a lone blade's end read as a nacelle or tower lies on the blade's axis
+# (its middle within this share of the blade's width there) and is at most this much wider.
 NACELLE_IN_LINE = 0.5
 NACELLE_AS_WIDE = 1.3
+NACELLE_GAP = 1.0  # ... or lies beyond a blade that stops short of it by at most its width there
 # Second look (``second_look``): a turbine whose detections span less than this share of the
 # frame is segmented again on a crop around it, padded by ZOOM_PAD of its size on each side.
 SMALL_TURBINE = 0.5
@@ -100,64 +101,99 @@ def _axis(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return c, v[:, int(np.argmax(w))]
 
 
-def absorb_tip_nacelles(inst: Instances, score_threshold: float) -> Instances:
-    """A "nacelle" that is the end of a lone blade becomes part of that blade; only detections
-    scoring ``score_threshold`` or more (what ``segment`` reports) are weighed, so a doubtful
-    detection never grows a blade's mask. Run on the whole photo, after the second look.
+def _blade_end(blade: np.ndarray, piece: np.ndarray, tower: bool, touching: bool) -> np.ndarray | None:
+    """Where ``piece`` is the end of ``blade`` (``absorb_blade_ends``), the pixels joining
+    them (the piece, and the hull of the blade's last stretch and the piece when a gap lies
+    between them); None where it is not."""
+    bp = np.argwhere(blade)[:, ::-1].astype(float)  # (x, y)
+    pp = np.argwhere(piece)[:, ::-1].astype(float)
+    if len(bp) < 16:
+        return None
+    c, u = _axis(bp)
+    n = np.array([-u[1], u[0]])
+    sb, tb = (bp - c) @ u, (bp - c) @ n
+    sn, tn = (pp - c) @ u, (pp - c) @ n
+    if np.median(sn) < 0:  # look along the blade towards the piece
+        sb, sn = -sb, -sn
+    lo, hi = np.percentile(sb, [1, 99])
+    length = hi - lo
+    end = sb > hi - 0.15 * length  # the blade's last stretch towards the piece
+    if end.sum() < 8 or length <= 0:
+        return None
+    t_lo, t_hi = np.percentile(tb[end], [1, 99])
+    width, mid = t_hi - t_lo, 0.5 * (t_lo + t_hi)
+    s_lo, s_hi = np.percentile(sn, [1, 99])
+    n_width = np.subtract(*np.percentile(tn, [99, 1]))
+    gap = s_lo - hi
+    if tower and s_hi - s_lo > n_width:
+        return None  # a tower running on along the blade's axis is a tower
+    if not touching:
+        if not 0 <= gap <= NACELLE_GAP * width:
+            return None
+        start = sb < lo + 0.15 * length
+        if start.sum() < 8 or width > np.subtract(*np.percentile(tb[start], [99, 1])):
+            return None  # a blade narrows to its tip: the end it widens to is at the hub
+    if not (np.mean(sn > hi - 0.15 * length) >= 0.9 and abs(np.median(tn) - mid) <= NACELLE_IN_LINE * width
+            and n_width <= NACELLE_AS_WIDE * width):
+        return None
+    if touching:
+        return piece
+    hull = cv2.convexHull(np.vstack([bp[end], pp]).astype(np.int32))
+    fill = np.zeros(blade.shape, np.uint8)
+    cv2.fillConvexPoly(fill, hull, 1)
+    return fill.astype(bool) | piece
+
+
+def absorb_blade_ends(inst: Instances, score_threshold: float) -> Instances:
+    """A "nacelle" or "tower" that is the end of a lone blade becomes part of that blade; only
+    detections scoring ``score_threshold`` or more (what ``segment`` reports) are weighed, so a
+    doubtful detection never grows a blade's mask. Run on the whole photo, after the second look.
 
     A nacelle carries the hub, where every blade's root meets, and sits on the tower. In a
     tip close-up the network can take the blade's rounded end for a nacelle (real photos: the
-    last chord of a blade tip against the ground). Such a detection lies inside the frame,
-    touches one blade and no tower, lies on that blade's axis beyond its end, and is no wider
-    than the blade there (NACELLE_IN_LINE, NACELLE_AS_WIDE): a true nacelle seen with one blade
-    is beside the blade's root, or wider than it, or on a tower, or (seen along the blade, at
-    its root) cut by the frame."""
+    last chord of a blade tip against the ground), or the end's bright rim, a short bar across
+    the blade, for a tower. Such a detection lies inside the frame (clear of its edges by the
+    few pixels a mask's edge may be off), touches one blade and no other tower, lies on that
+    blade's axis beyond its end, and is no wider than the blade there (NACELLE_IN_LINE,
+    NACELLE_AS_WIDE): a true nacelle seen with one blade is beside the blade's root, or wider
+    than it, or on a tower, or (seen along the blade, at its root) cut by the frame. A "tower"
+    must also be no longer along the blade than it is across it: a true tower in line with a
+    blade (a blade pointing up from the hub above it) runs on along the axis far beyond its own
+    width, and one that touches the nacelle is no blade's end. Where the network's blade stops
+    short of the piece, a piece that touches no blade joins the one blade whose end it lies
+    beyond by at most NACELLE_GAP of the blade's width, and the gap between them with it."""
     sure = inst.scores >= score_threshold
-    nac = np.nonzero(sure & (inst.labels == "nacelle"))[0]
+    ends = np.nonzero(sure & np.isin(inst.labels, ("nacelle", "tower")))[0]
     blades = np.nonzero(sure & (inst.labels == "blade"))[0]
-    if not len(nac) or not len(blades):
+    if not len(ends) or not len(blades):
         return inst
     H, W = inst.image_size
     r = max(2, int(round(0.005 * max(H, W))))
     grow = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-    towers = inst[sure & (inst.labels == "tower")].union()
     masks, boxes = inst.masks.copy(), inst.boxes.copy()
     drop = []
-    for i in nac:
+    for i in ends:
         m = inst.masks[i]
-        if m.sum() < 16 or m[0].any() or m[-1].any() or m[:, 0].any() or m[:, -1].any():
+        if m.sum() < 16 or m[:r].any() or m[-r:].any() or m[:, :r].any() or m[:, -r:].any():
             continue  # a tip close-up shows the tip's end in the frame; a cut part is no tip
         near = cv2.dilate(m.view(np.uint8), grow).astype(bool)
+        holds = ("tower",) if inst.labels[i] == "nacelle" else ("tower", "nacelle")
+        if any((near & inst.masks[k]).any() for k in ends if k != i and inst.labels[k] in holds):
+            continue
         touching = [j for j in blades if (near & inst.masks[j]).any()]
-        if len(touching) != 1 or (near & towers).any():
+        if len(touching) > 1:
+            continue  # where two blades meet is the hub
+        tower = inst.labels[i] == "tower"
+        found = [(j, f) for j in (touching or blades)
+                 if (f := _blade_end(inst.masks[j], m, tower, bool(touching))) is not None]
+        if len(found) != 1:
             continue
-        j = touching[0]
-        b = inst.masks[j]
-        bp = np.argwhere(b)[:, ::-1].astype(float)  # (x, y)
-        np_ = np.argwhere(m)[:, ::-1].astype(float)
-        if len(bp) < 16:
-            continue
-        c, u = _axis(bp)
-        n = np.array([-u[1], u[0]])
-        sb, tb = (bp - c) @ u, (bp - c) @ n
-        sn, tn = (np_ - c) @ u, (np_ - c) @ n
-        if np.median(sn) < 0:  # look along the blade towards the detection
-            sb, sn = -sb, -sn
-        lo, hi = np.percentile(sb, [1, 99])
-        length = hi - lo
-        end = sb > hi - 0.15 * length  # the blade's last stretch towards the detection
-        if end.sum() < 8 or length <= 0:
-            continue
-        t_lo, t_hi = np.percentile(tb[end], [1, 99])
-        width, mid = t_hi - t_lo, 0.5 * (t_lo + t_hi)
-        n_width = np.subtract(*np.percentile(tn, [99, 1]))
-        beyond = np.mean(sn > hi - 0.15 * length)
-        if (beyond >= 0.9 and abs(np.median(tn) - mid) <= NACELLE_IN_LINE * width
-                and n_width <= NACELLE_AS_WIDE * width):
-            masks[j] |= m
-            boxes[j, :2] = np.minimum(boxes[j, :2], inst.boxes[i, :2])
-            boxes[j, 2:] = np.maximum(boxes[j, 2:], inst.boxes[i, 2:])
-            drop.append(i)
+        j, fill = found[0]
+        masks[j] |= fill
+        ys, xs = np.nonzero(fill)
+        boxes[j, :2] = np.minimum(boxes[j, :2], [xs.min(), ys.min()])
+        boxes[j, 2:] = np.maximum(boxes[j, 2:], [xs.max() + 1, ys.max() + 1])
+        drop.append(i)
     if not drop:
         return inst
     keep = np.setdiff1d(np.arange(len(inst)), drop)
