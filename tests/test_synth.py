@@ -265,10 +265,17 @@ def test_default_renders_stay_byte_identical():
     they rendered before them (the held-out benchmark and trained models depend on it). The
     digests (image, masks, labels, truth) were taken before the wider views existed; the truth's
     turbine records have since gained the blade thickness and nacelle position keys (the
-    image and mask bytes did not change)."""
+    image and mask bytes did not change).
+
+    Two digests are pinned for two of them: numpy computes float64 sin, cos, exp and log with
+    its own AVX-512 kernels on a CPU that has AVX-512 and with the C library's elsewhere, and
+    the two differ in the last bit, which moves these renders' truth and edge pixels. The first
+    digest of each pair was taken on an AVX-512 x86 CPU, the second on an AVX2-only one (numpy
+    2.4.6; disabling AVX2 there gives the same bytes)."""
     assert _digest(render_sample(0, 96, 64)) == "95c035e899a51af5"
-    assert _digest(render_sample(3, 96, 64, view="front")) == "55599ae6657a8650"
-    assert _digest(render_sample(4, 96, 64, view="rear", labels="half")) == "4e3ad72116eed8e1"
+    assert _digest(render_sample(3, 96, 64, view="front")) in ("55599ae6657a8650", "f21b608a1a93001a")
+    assert _digest(render_sample(4, 96, 64, view="rear", labels="half")) in ("4e3ad72116eed8e1",
+                                                                             "9693b9516423409b")
 
 
 @pytest.fixture(scope="module")
