@@ -304,6 +304,8 @@ def test_a_site_wider_than_the_limit_is_refused_naming_the_key(tmp_path):
 # ---- DJI WPML (.kmz) ------------------------------------------------------------------------------
 KML = "{http://www.opengis.net/kml/2.2}"
 WPML = "{http://www.dji.com/wpmz/1.0.2}"
+TURN_STOP = "toPointAndStopWithDiscontinuityCurvature"  # straight in, stop at the point
+TURN_PASS = "toPointAndPassWithContinuityCurvature"  # through the point without stopping
 ACTION_PARAMS = {
     "gimbalRotate": ["gimbalHeadingYawBase", "gimbalRotateMode", "gimbalPitchRotateEnable",
                      "gimbalPitchRotateAngle", "gimbalRollRotateEnable", "gimbalRollRotateAngle",
@@ -311,6 +313,7 @@ ACTION_PARAMS = {
                      "gimbalRotateTime", "payloadPositionIndex"],
     "rotateYaw": ["aircraftHeading", "aircraftPathMode"],
     "takePhoto": ["payloadPositionIndex", "fileSuffix", "useGlobalPayloadLensIndex"],
+    "gimbalEvenlyRotate": ["gimbalPitchRotateAngle", "payloadPositionIndex"],
 }
 
 
@@ -384,21 +387,39 @@ def parse_wpml(text: str, template: bool) -> dict:
         assert -180 <= heading <= 180
         assert _text(hp, "waypointHeadingPathMode") == "followBadArc"
         tp = pm.find(WPML + "waypointTurnParam")
-        assert _text(tp, "waypointTurnMode") == "toPointAndStopWithDiscontinuityCurvature"
-        actions = []
+        mode = _text(tp, "waypointTurnMode")
+        assert mode in (TURN_STOP, TURN_PASS)
+        assert float(_text(tp, "waypointTurnDampingDist")) == 0  # only coordinateTurn uses it
+        after = _children(pm)[_children(pm).index("waypointTurnParam") + 1:]
+        # the continuity-curvature modes need useStraightLine; 1 keeps the checked straight legs
+        assert (after[:1] == ["useStraightLine"]) == (mode == TURN_PASS)
+        if mode == TURN_PASS:
+            assert _text(pm, "useStraightLine") == "1"
+        actions, along = [], None
         for g in pm.findall(WPML + "actionGroup"):
             gid = int(_text(g, "actionGroupId"))
             assert gid == len(groups), "action group ids count up from 0"
             groups.add(gid)
-            assert int(_text(g, "actionGroupStartIndex")) == int(_text(g, "actionGroupEndIndex")) == k
-            assert _text(g, "actionGroupMode") == "sequence"
-            assert _text(g.find(WPML + "actionTrigger"), "actionTriggerType") == "reachPoint"
+            trigger = _text(g.find(WPML + "actionTrigger"), "actionTriggerType")
+            first, last = int(_text(g, "actionGroupStartIndex")), int(_text(g, "actionGroupEndIndex"))
+            acts = []
             for a, act in enumerate(g.findall(WPML + "action")):
                 assert int(_text(act, "actionId")) == a
                 func = _text(act, "actionActuatorFunc")
                 p = act.find(WPML + "actionActuatorFuncParam")
                 assert _children(p) == ACTION_PARAMS[func], func
-                actions.append((func, {c: _text(p, c) for c in ACTION_PARAMS[func]}))
+                acts.append((func, {c: _text(p, c) for c in ACTION_PARAMS[func]}))
+            if trigger == "reachPoint":  # at this waypoint, one after the other
+                assert first == last == k and _text(g, "actionGroupMode") == "sequence"
+                assert "gimbalEvenlyRotate" not in [a for a, _ in acts]
+                actions += acts
+            else:  # along the leg to the next waypoint: only the gimbal, turned evenly
+                assert trigger == "betweenAdjacentPoints" and (first, last) == (k, k + 1)
+                assert _text(g, "actionGroupMode") == "parallel" and along is None
+                assert [a for a, _ in acts] == ["gimbalEvenlyRotate"]
+                along = float(acts[0][1]["gimbalPitchRotateAngle"])
+        if mode == TURN_PASS:  # flown through: nothing that needs the aircraft standing
+            assert not {"rotateYaw", "gimbalRotate"} & {a for a, _ in actions}
         for func, p in actions:
             if func == "rotateYaw":
                 heading = float(p["aircraftHeading"])
@@ -407,6 +428,7 @@ def parse_wpml(text: str, template: bool) -> dict:
             if func == "gimbalRotate":
                 assert p["gimbalRotateMode"] == "absoluteAngle" and p["gimbalPitchRotateEnable"] == "1"
         wps.append({"lat": lat, "lon": lon, "height": h, "speed": v, "heading": heading,
+                    "stop": mode == TURN_STOP, "gimbal_along_next_leg": along,
                     "gimbal": gimbal, "actions": [a for a, _ in actions],
                     "params": dict((a, p) for a, p in actions)})
     assert wps, "a wayline has at least one waypoint"
@@ -456,21 +478,86 @@ def test_dji_kmz_parses_back_to_the_plan_and_matches_golden(tmp_path):
             got = np.array([[wp["lat"], wp["lon"], wp["height"] + truth[a, 2]]])
             assert _metres_apart(got, truth[i:i + 1]).max() < 0.01  # 1 cm
             assert (tp["lat"], tp["lon"], tp["height"]) == (wp["lat"], wp["lon"], wp["height"])
-            assert abs(_wrap(wp["heading"] - r.yaw_deg[i])) < 0.1
+            # exact where it stops (rotateYaw); WPML's whole degree where it flies through
+            assert abs(_wrap(wp["heading"] - r.yaw_deg[i])) <= (0.1 if wp["stop"] else 0.5)
             assert wp["speed"] == pytest.approx(r.speed[i + 1], abs=0.01)
             assert tp["gimbal"] == pytest.approx(r.gimbal_pitch_deg[i], abs=0.1)
             assert ("takePhoto" in wp["actions"]) == bool(r.photo[i])
             if r.photo[i]:
                 assert wp["actions"][-1] == "takePhoto", "the photo is taken after turning"
                 assert wp["params"]["takePhoto"]["fileSuffix"] == r.component[i].replace("/", "_")
-        # the gimbal the aircraft holds at each waypoint, from gimbalRotate actions alone
-        held = None
-        for i, wp in zip(idx, w["waypoints"]):
-            if "gimbalRotate" in wp["actions"]:
-                held = float(wp["params"]["gimbalRotate"]["gimbalPitchRotateAngle"])
-            assert held == pytest.approx(r.gimbal_pitch_deg[i], abs=0.1)
-        assert sum("gimbalRotate" in wp["actions"] for wp in w["waypoints"]) == \
-            1 + int(np.sum(np.diff(r.gimbal_pitch_deg[a + 1:b]) != 0))
+        _check_gimbal_held(w["waypoints"], r.gimbal_pitch_deg[a + 1:b])
+
+
+def _check_gimbal_held(wps: list[dict], pitch: np.ndarray) -> None:
+    """The gimbal the aircraft holds at each waypoint, from its gimbal actions alone: turned at
+    a stop, or evenly along the leg into a waypoint flown through; one action per change."""
+    held, along = None, None
+    for wp, p in zip(wps, pitch):
+        if along is not None:
+            assert not wp["stop"], "gimbalEvenlyRotate leads only to a waypoint flown through"
+            held = along
+        if "gimbalRotate" in wp["actions"]:
+            assert wp["stop"]
+            held = float(wp["params"]["gimbalRotate"]["gimbalPitchRotateAngle"])
+        assert held == pytest.approx(p, abs=0.1)
+        along = wp["gimbal_along_next_leg"]
+    turns = sum(("gimbalRotate" in wp["actions"]) + (wp["gimbal_along_next_leg"] is not None)
+                for wp in wps)
+    assert turns == 1 + int(np.sum(np.diff(pitch) != 0))
+
+
+def _pass_plan() -> Plan:
+    """Take off, a straight photo pass of five stations (one a 10 deg bend, the heading not a
+    whole degree), a right-angle corner into a second pass whose gimbal turns on its last leg, land."""
+    t = Turbine.with_rotor_azimuth(90, id="T1", base=(0, 0, 0), hub_height=80, rotor_diameter=90,
+                                   yaw_deg=180)
+    launch = [60.0, -40.0, 0.0]
+    bend = [30 + 2.5 * np.cos(np.radians(10)), -20 + 2.5 * np.sin(np.radians(10)), 60]
+    pos = np.array([launch, [60, -40, 10], [25, -20, 60], [27.5, -20, 60], [30, -20, 60], bend,
+                    [bend[0] + 2.5 * np.cos(np.radians(10)), bend[1] + 2.5 * np.sin(np.radians(10)), 60],
+                    [bend[0] + 2.5 * np.cos(np.radians(10)), bend[1] + 5, 60],
+                    [bend[0] + 2.5 * np.cos(np.radians(10)), bend[1] + 7.5, 60],
+                    [bend[0] + 2.5 * np.cos(np.radians(10)), bend[1] + 10, 60], [60, -40, 10], launch])
+    n = len(pos)
+    photo = np.array([0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 0, 0], bool)
+    comp = ["launch", "launch"] + ["T1/blade1/leading_edge"] * 5 + ["T1/blade1/trailing_edge"] * 3 \
+        + ["return", "return"]
+    route = Route("UAV1", t=np.cumsum(np.r_[0, np.ones(n - 1) * 3.0]), pos=pos,
+                  speed=np.r_[0, 3.0, 8.0, 2.7, 2.7, 2.7, 2.7, 2.7, 2.7, 2.7, 8.0, 3.0],
+                  yaw_deg=np.r_[0, 0, 0, 12.34, 12.34, 12.34, 12.34, 102.5, 102.5, 102.5, 102.5, 102.5],
+                  gimbal_pitch_deg=np.r_[0, 0, -5, -5, -5, -5, -5, -5, -20, -20, 0, 0],
+                  photo=photo, component=np.array(comp, dtype=object))
+    return Plan([t], Camera(5456, 3632, 16, 23.2), [route], 3.0, 1.5, ORIGIN, {})
+
+
+def test_dji_kmz_flies_a_photo_pass_without_stopping(tmp_path):
+    """The aircraft stops where the plan's timing stops it (corners.stops) and flies through the
+    stations of a straight pass, photographing in flight: a stop at each photo would add about
+    1 s per photo to what the plan says (16.8 min a turbine instead of 10)."""
+    plan = _pass_plan()
+    r = plan.routes[0]
+    (path,) = [f for f in export_all(plan, tmp_path, stem="pass", dji="m350-p1") if f.suffix == ".kmz"]
+    template, waylines = _read_kmz(path)
+    _golden("pass_s1.template.kml", template)
+    _golden("pass_s1.waylines.wpml", waylines)
+    t, w = parse_wpml(template, template=True), parse_wpml(waylines, template=False)
+    stop = [wp["stop"] for wp in w["waypoints"]]
+    assert stop == [wp["stop"] for wp in t["waypoints"]]
+    # airborne 1..10: the climb's top (1) and the corner into the pass (2) stop; the pass (3..5,
+    # with its 10 deg bend at 4) is flown through; the right-angle corner (6) stops; 7 and 8 are
+    # flown through, the gimbal turning on the leg into 8; the pass's end (9) and the last
+    # airborne point (10, the gimbal levelled there) stop.
+    assert stop == [True, True, False, False, False, True, False, False, True, True]
+    for i, wp in zip(range(1, 11), w["waypoints"]):
+        assert ("takePhoto" in wp["actions"]) == bool(r.photo[i])
+        assert ("rotateYaw" in wp["actions"]) == (wp["stop"] and abs(r.yaw_deg[i] % 1) > 0.05)
+        assert abs(_wrap(wp["heading"] - r.yaw_deg[i])) <= (0.1 if wp["stop"] else 0.5)
+    assert w["waypoints"][6]["gimbal_along_next_leg"] == -20  # on the leg 7 -> 8
+    _check_gimbal_held(w["waypoints"], r.gimbal_pitch_deg[1:11])
+    # The plan's own timing stops exactly there.
+    from wtcli.plan.corners import stops
+    assert list(stops(r.pos)[1:11] | np.isin(np.arange(1, 11), [1, 10])) == stop
 
 
 def test_dji_kmz_for_every_aircraft_and_the_sample_site(tmp_path):
@@ -488,13 +575,15 @@ def test_dji_kmz_for_every_aircraft_and_the_sample_site(tmp_path):
     real = plan_mission(mission)
     files = export_all(real, tmp_path / "real", stem="m", dji="m30t",
                        cruise=mission.fleet.cruise_speed_m_s, hover=mission.fleet.inspection_speed_m_s)
-    photos = 0
+    photos = in_flight = 0
     for f in files:
         if f.suffix == ".kmz":
             for text, template in zip(_read_kmz(f), (True, False)):
                 wps = parse_wpml(text, template)["waypoints"]
             photos += sum("takePhoto" in wp["actions"] for wp in wps)
+            in_flight += sum("takePhoto" in wp["actions"] and not wp["stop"] for wp in wps)
     assert photos == real.summary["photos"]
+    assert in_flight > 0.8 * photos, "photo passes are flown, not stop-and-shoot"
 
 
 def test_dji_kmz_refuses_what_dji_waylines_cannot_fly(tmp_path):

@@ -53,6 +53,7 @@ from wtcli.fly import rigid
 from wtcli.fly.navigation import Navigation
 from wtcli.fly.scenario import Scenario
 from wtcli.fly.wind import WindSeries
+from wtcli.plan.corners import corner_speeds
 
 G = 9.81
 SETTLE_S = 3.0  # hover at the last waypoint after the reference ends
@@ -105,39 +106,18 @@ def _box(x: np.ndarray, width: int) -> np.ndarray:
     return (c[width:] - c[:-width]) / width
 
 
-def corner_speeds(pos: np.ndarray, v_leg: np.ndarray, accel: float, corner_m: float) -> np.ndarray:
-    """Speed allowed through each waypoint: 0 at the ends and around zero-length legs, the
-    "junction deviation" limit sqrt(a d sin(q/2) / (1 - sin(q/2))) at a turn of interior angle
-    q (straight on: q = 180 deg, no limit), and never above either leg's speed."""
-    m = len(pos)
-    seg = np.diff(pos, axis=0)
-    L = np.linalg.norm(seg, axis=1)
-    u = seg / np.maximum(L, 1e-12)[:, None]
-    vc = np.zeros(m)
-    if m < 3:
-        return vc
-    a_in, a_out = u[:-1], u[1:]
-    cos_q = np.clip(-(a_in * a_out).sum(1), -1.0, 1.0)  # interior angle between the legs
-    sh = np.sqrt((1 - cos_q) / 2)  # sin(q/2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        lim = np.where(sh > 0.9999, np.inf, np.sqrt(accel * corner_m * sh / np.maximum(1 - sh, 1e-9)))
-    inner = np.minimum(np.minimum(v_leg[:-1], v_leg[1:]), lim)
-    zero = (L[:-1] < 1e-6) | (L[1:] < 1e-6)
-    vc[1:-1] = np.where(zero, 0.0, inner)
-    return vc
-
-
 def make_reference(t_wp: np.ndarray, pos_wp: np.ndarray, yaw_wp: np.ndarray, pitch_wp: np.ndarray,
                    dt: float, smoothing_s: float, accel: float = 2.5, corner_m: float = 0.05,
                    speed: np.ndarray | None = None, yaw_rate: float | None = None,
                    pitch_rate: float | None = None, settle_s: float = SETTLE_S) -> Reference:
     """The set-point an autopilot's mission mode follows: the planned polyline exactly, each leg
     at the planned ``speed`` (else its length over its planned duration) with trapezoidal speed
-    changes at ``accel`` and corners taken at the junction-deviation speed; zero-length legs
-    (hover, turning on the spot) keep their planned duration, and a leg's planned time beyond
-    flying it so is a hover at its end. Time runs behind a plan that asks for instant speed
-    changes or camera turns; photos are triggered when the set-point reaches their waypoint. The
-    set-point then hovers at the last waypoint for ``settle_s`` (room for a leash's clock)."""
+    changes at ``accel``, stopping where the exported mission stops (``wtcli.plan.corners``: sharp
+    corners, the ends, zero-length legs) and taking the other waypoints at the junction-deviation
+    speed; zero-length legs (hover, turning on the spot) keep their planned duration, and a leg's
+    planned time beyond flying it so is a hover at its end. Time runs behind a plan that asks
+    for instant speed changes or camera turns; photos are triggered when the set-point reaches
+    their waypoint. The set-point then hovers at the last waypoint for ``settle_s`` (room for a leash's clock)."""
     tw = np.asarray(t_wp, float)
     P = np.asarray(pos_wp, float)
     seg = np.diff(P, axis=0)
@@ -158,7 +138,7 @@ def make_reference(t_wp: np.ndarray, pos_wp: np.ndarray, yaw_wp: np.ndarray, pit
     v_leg = np.where(moving & (t_turn > 0), np.minimum(v_leg, L / np.maximum(t_turn, 1e-9)), v_leg)
     dtp = np.where(~moving, np.maximum(dtp, t_turn), dtp)
     a = float(accel)
-    vc = corner_speeds(P, v_leg, a, corner_m)
+    vc = corner_speeds(P, v_leg, a, corner_m)  # 0 where the exported mission stops
     # Forward and backward passes: reachable with |acceleration| <= a along each leg.
     for j in range(len(L)):
         vc[j + 1] = min(vc[j + 1], math.sqrt(vc[j] ** 2 + 2 * a * L[j]))

@@ -9,6 +9,8 @@ Where things are:
   the one place plan and fly check it (``clearance_site_kernel.py`` compiled; one turbine:
   ``wtcli/geometry/clearance_kernel.py``)
 * ``mission.py`` ``plan_mission``: order, fleet split, batteries, timing, checks, coverage
+* ``corners.py`` where the aircraft stops and how fast it flies through the other waypoints: one
+  model for the plan's timing, fly's set-point and the DJI export
 * ``exports.py`` QGroundControl .plan, MAVLink QGC WPL 110, GeoJSON
 * ``path_views.py`` front/side/top views of the path (PNG)
 """

@@ -11,12 +11,17 @@ altitude, see ``wtcli.plan.exports``). The drone must take off from the planned 
 offline: ``site.origin.alt`` is above mean sea level, and EGM96 and the ellipsoid differ by up to
 ±100 m. docs/plan.md ("DJI WPML") explains the trap.
 
-Each waypoint is one plan waypoint between take-off and landing: stop at the point
-(``toPointAndStopWithDiscontinuityCurvature``, so legs stay the straight segments the clearance
-was checked on), ``waypointSpeed`` = the planned speed of the leg leaving it, heading
-``smoothTransition`` to the plan's heading (an integer in WPML) plus a ``rotateYaw`` action to the
-exact heading where the two differ, ``gimbalRotate`` where the gimbal pitch changes, then
-``takePhoto`` at photo waypoints (file suffix = the component photographed). Finish: go home.
+Each waypoint is one plan waypoint between take-off and landing, flown where the plan's timing
+says (``wtcli.plan.corners``): through it on straight segments
+(``toPointAndPassWithContinuityCurvature``, ``useStraightLine`` 1: a photo pass is flown without
+stopping, the photos taken in flight) or stopping at it
+(``toPointAndStopWithDiscontinuityCurvature``: sharper corners, the first and last waypoint).
+Legs stay the straight segments the clearance was checked on. ``waypointSpeed`` = the planned
+speed of the leg leaving it, heading ``smoothTransition`` to the plan's heading (an integer in
+WPML) plus, where the aircraft stops, a ``rotateYaw`` action to the exact heading where the two differ (a waypoint flown through keeps
+the whole degree, within 0.5 deg of the plan's), the gimbal pitch where it changes
+(``gimbalRotate`` at a stop; ``gimbalEvenlyRotate`` along the leg into a waypoint flown through),
+then ``takePhoto`` at photo waypoints (file suffix = the component photographed). Finish: go home.
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wtcli.errors import ConfigError
+from wtcli.plan.corners import stops
 from wtcli.plan.geodesy import enu_to_geodetic
 from wtcli.plan_file import Plan, Route
 
@@ -37,6 +43,8 @@ WPML_NS = "http://www.dji.com/wpmz/1.0.2"
 # DJI's waylines accept waypoint and transitional speeds up to 15 m/s.
 MAX_WAYLINE_SPEED_M_S = 15.0
 HEIGHT_MODE = "relativeToStartPoint"
+TURN_STOP = "toPointAndStopWithDiscontinuityCurvature"  # straight in, stop at the point
+TURN_PASS = "toPointAndPassWithContinuityCurvature"  # fly through the point (straight segments)
 _ZIP_TIME = (1980, 1, 1, 0, 0, 0)  # fixed, so the same plan gives the same bytes
 
 
@@ -73,6 +81,7 @@ class Waypoint:
     gimbal_pitch: float  # deg, 0 level, -90 down
     photo: bool
     component: str
+    stop: bool = True  # the aircraft stops here (else it flies through, on straight segments)
 
 
 def _heading180(deg: float) -> float:
@@ -93,6 +102,8 @@ def sortie_waypoints(plan: Plan, route: Route, first: int, last: int) -> list[Wa
         raise ConfigError("exports to lat/lon need site.origin (lat, lon, alt) in turbines.yaml")
     llh = enu_to_geodetic(route.pos[first:last + 1], plan.site_origin)
     rel = llh[:, 2] - llh[0, 2]
+    halt = stops(route.pos)
+    halt[[first + 1, last - 1]] = True  # the wayline starts and ends standing
     out = []
     for i in range(first + 1, last):
         j = i - first
@@ -104,7 +115,7 @@ def sortie_waypoints(plan: Plan, route: Route, first: int, last: int) -> list[Wa
                 "max_speed_m_s for a DJI export")
         out.append(Waypoint(float(llh[j, 0]), float(llh[j, 1]), float(rel[j]), v,
                             _heading180(route.yaw_deg[i]), float(route.gimbal_pitch_deg[i]),
-                            bool(route.photo[i]), str(route.component[i])))
+                            bool(route.photo[i]), str(route.component[i]), bool(halt[i])))
     return out
 
 
@@ -160,24 +171,33 @@ def _heading_param(parent: ET.Element, wp: Waypoint) -> None:
     _sub(hp, "waypointHeadingPathMode", "followBadArc")  # WPML's name for the shortest turn
 
 
-def _turn_param(parent: ET.Element) -> None:
+def _turn_param(parent: ET.Element, wp: Waypoint) -> None:
     tp = _sub(parent, "waypointTurnParam")
-    _sub(tp, "waypointTurnMode", "toPointAndStopWithDiscontinuityCurvature")
+    _sub(tp, "waypointTurnMode", TURN_STOP if wp.stop else TURN_PASS)
     _sub(tp, "waypointTurnDampingDist", 0)
+    if not wp.stop:  # required with the continuity-curvature modes: 1 = straight segments
+        _sub(parent, "useStraightLine", 1)
+
+
+def _pitch_changes(a: Waypoint | None, b: Waypoint) -> bool:
+    return a is None or round(b.gimbal_pitch, 1) != round(a.gimbal_pitch, 1)
 
 
 def _actions(parent: ET.Element, k: int, wp: Waypoint, prev: Waypoint | None,
-             group_id: int) -> bool:
-    """The action group of waypoint ``k``; False when it needs none."""
+             nxt: Waypoint | None, group_id: int) -> int:
+    """The action groups of waypoint ``k``; how many. At the waypoint (``reachPoint``): where it
+    stops, the gimbal's and the exact heading's turns; the photo. Along the leg to a next
+    waypoint flown through (``betweenAdjacentPoints``): the gimbal turned evenly, so the aircraft
+    need not stop for it."""
     acts: list[tuple[str, list[tuple[str, object]]]] = []
-    if prev is None or round(wp.gimbal_pitch, 1) != round(prev.gimbal_pitch, 1):
+    if wp.stop and _pitch_changes(prev, wp):
         acts.append(("gimbalRotate", [
             ("gimbalHeadingYawBase", "north"), ("gimbalRotateMode", "absoluteAngle"),
             ("gimbalPitchRotateEnable", 1), ("gimbalPitchRotateAngle", _num(wp.gimbal_pitch, 2)),
             ("gimbalRollRotateEnable", 0), ("gimbalRollRotateAngle", 0),
             ("gimbalYawRotateEnable", 0), ("gimbalYawRotateAngle", 0),
             ("gimbalRotateTimeEnable", 0), ("gimbalRotateTime", 0), ("payloadPositionIndex", 0)]))
-    if abs(wp.heading - round(wp.heading)) > 0.05:
+    if wp.stop and abs(wp.heading - round(wp.heading)) > 0.05:
         turn = _heading180(wp.heading - (prev.heading if prev else wp.heading))
         acts.append(("rotateYaw", [("aircraftHeading", _num(wp.heading, 2)),
                                    ("aircraftPathMode",
@@ -186,14 +206,26 @@ def _actions(parent: ET.Element, k: int, wp: Waypoint, prev: Waypoint | None,
         acts.append(("takePhoto", [("payloadPositionIndex", 0),
                                    ("fileSuffix", wp.component.replace("/", "_")),
                                    ("useGlobalPayloadLensIndex", 1)]))
-    if not acts:
-        return False
+    n = 0
+    if acts:
+        _group(parent, group_id, k, k, "sequence", "reachPoint", acts)
+        n += 1
+    if nxt is not None and not nxt.stop and _pitch_changes(wp, nxt):
+        _group(parent, group_id + n, k, k + 1, "parallel", "betweenAdjacentPoints",
+               [("gimbalEvenlyRotate", [("gimbalPitchRotateAngle", _num(nxt.gimbal_pitch, 2)),
+                                        ("payloadPositionIndex", 0)])])
+        n += 1
+    return n
+
+
+def _group(parent: ET.Element, group_id: int, first: int, last: int, mode: str, trigger: str,
+           acts: list[tuple[str, list[tuple[str, object]]]]) -> None:
     g = _sub(parent, "actionGroup")
     _sub(g, "actionGroupId", group_id)
-    _sub(g, "actionGroupStartIndex", k)
-    _sub(g, "actionGroupEndIndex", k)
-    _sub(g, "actionGroupMode", "sequence")
-    _sub(_sub(g, "actionTrigger"), "actionTriggerType", "reachPoint")
+    _sub(g, "actionGroupStartIndex", first)
+    _sub(g, "actionGroupEndIndex", last)
+    _sub(g, "actionGroupMode", mode)
+    _sub(_sub(g, "actionTrigger"), "actionTriggerType", trigger)
     for a, (func, params) in enumerate(acts):
         act = _sub(g, "action")
         _sub(act, "actionId", a)
@@ -201,7 +233,6 @@ def _actions(parent: ET.Element, k: int, wp: Waypoint, prev: Waypoint | None,
         p = _sub(act, "actionActuatorFuncParam")
         for name, value in params:
             _sub(p, name, value)
-    return True
 
 
 def _placemark(folder: ET.Element, k: int, wp: Waypoint) -> ET.Element:
@@ -232,8 +263,9 @@ def waylines_wpml(wps: list[Waypoint], ac: Aircraft, cruise: float, inspection: 
         _sub(pm, "executeHeight", _num(wp.height, 3))
         _sub(pm, "waypointSpeed", _num(wp.speed, 2))
         _heading_param(pm, wp)
-        _turn_param(pm)
-        gid += _actions(pm, k, wp, wps[k - 1] if k else None, gid)
+        _turn_param(pm, wp)
+        gid += _actions(pm, k, wp, wps[k - 1] if k else None,
+                        wps[k + 1] if k + 1 < len(wps) else None, gid)
     return _to_text(root)
 
 
@@ -251,7 +283,7 @@ def template_kml(wps: list[Waypoint], ac: Aircraft, cruise: float, inspection: f
     _sub(cs, "positioningType", "GPS")
     _sub(folder, "autoFlightSpeed", _num(min(inspection, MAX_WAYLINE_SPEED_M_S), 2))
     _sub(folder, "gimbalPitchMode", "usePointSetting")
-    _sub(folder, "globalWaypointTurnMode", "toPointAndStopWithDiscontinuityCurvature")
+    _sub(folder, "globalWaypointTurnMode", TURN_STOP)
     pp = _sub(folder, "payloadParam")
     _sub(pp, "payloadPositionIndex", 0)
     _sub(pp, "imageFormat", ac.image_format)
@@ -268,9 +300,10 @@ def template_kml(wps: list[Waypoint], ac: Aircraft, cruise: float, inspection: f
         _sub(pm, "useGlobalHeadingParam", 0)
         _heading_param(pm, wp)
         _sub(pm, "useGlobalTurnParam", 0)
-        _turn_param(pm)
+        _turn_param(pm, wp)
         _sub(pm, "gimbalPitchAngle", _num(wp.gimbal_pitch, 2))
-        gid += _actions(pm, k, wp, wps[k - 1] if k else None, gid)
+        gid += _actions(pm, k, wp, wps[k - 1] if k else None,
+                        wps[k + 1] if k + 1 < len(wps) else None, gid)
     return _to_text(root)
 
 

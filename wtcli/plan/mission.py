@@ -30,6 +30,7 @@ from wtcli.errors import ConfigError, PlanError
 from wtcli.geometry import Camera, Turbine
 from wtcli.geometry.coverage import Coverage, turbine_coverage
 from wtcli.plan.config import Mission
+from wtcli.plan.corners import corner_speeds
 from wtcli.plan.paths import (GAP_ROUND_FINE_SAMPLES, WP, Chunk, PassParams, _Blocked,
                               add_gap_views, blade_chunk, connect, gap_plan, gap_views,
                               insert_views, nacelle_chunk,
@@ -323,23 +324,16 @@ def _leg_speeds_flown(P: np.ndarray, v: np.ndarray, climb: float,
 def _flown_leg_times(P: np.ndarray, v: np.ndarray, climb: float,
                      turn_s: np.ndarray | None = None) -> np.ndarray:
     """Each leg's time as flown: at its speed ``v`` (and the climb rate, and slow enough for
-    the camera turn ``turn_s`` where given), slowing to the corner speed at each turn and to a
-    stop at the ends and zero-length legs, speed changes at ACCEL_M_S2 (trapezoids); a
+    the camera turn ``turn_s`` where given), stopping where the aircraft stops
+    (``corners.stops``: the ends, zero-length legs, sharp corners) and through the other
+    waypoints at the junction-deviation speed, speed changes at ACCEL_M_S2 (trapezoids); a
     zero-length leg takes its turn's time."""
     D = np.diff(P, axis=0)
     L = np.linalg.norm(D, axis=1)
     moving = L > 1e-6
     ve = _leg_speeds_flown(P, v, climb, turn_s)
-    m, a = len(P), ACCEL_M_S2
-    vc = np.zeros(m)
-    if m >= 3:
-        u = D / np.maximum(L, 1e-12)[:, None]
-        sh = np.sqrt((1 - np.clip(-(u[:-1] * u[1:]).sum(1), -1.0, 1.0)) / 2)  # sin(q/2)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            lim = np.where(sh > 0.9999, np.inf,
-                           np.sqrt(a * CORNER_M * sh / np.maximum(1 - sh, 1e-9)))
-        vc[1:-1] = np.where(moving[:-1] & moving[1:], np.minimum(np.minimum(ve[:-1], ve[1:]), lim),
-                            0.0)
+    a = ACCEL_M_S2
+    vc = corner_speeds(P, ve, a, CORNER_M)  # 0 where the aircraft stops
     for j in range(len(L)):  # reachable with |acceleration| <= a
         vc[j + 1] = min(vc[j + 1], math.sqrt(vc[j] ** 2 + 2 * a * L[j]))
     for j in range(len(L) - 1, -1, -1):
