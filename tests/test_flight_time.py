@@ -79,6 +79,26 @@ def test_flown_leg_times_pay_for_speed_changes_and_corners():
         10 / 3 + 3 / ACCEL_M_S2)
 
 
+def test_the_aircraft_flies_through_gentle_bends_and_stops_at_sharp_corners():
+    """As a DJI mission flies (wtcli/plan/corners.py): a bend of 20 deg or less costs nothing at
+    pass speed, a sharper corner is a full stop: the two legs timed as if flown apart."""
+    from wtcli.plan.corners import PASS_TURN_DEG, stops
+
+    def bent(deg):
+        u = np.radians(deg)
+        return np.array([[0.0, 0, 50], [50, 0, 50], [50 + 50 * np.cos(u), 50 * np.sin(u), 50]])
+
+    v = np.array([2.7, 2.7])
+    one_leg = _flown(np.array([[0.0, 0, 50], [100, 0, 50]]), 2.7, 3.0)
+    assert _flown_leg_times(bent(10), v, 3.0).sum() == pytest.approx(one_leg)
+    assert _flown_leg_times(bent(PASS_TURN_DEG), v, 3.0).sum() == pytest.approx(one_leg)
+    apart = 2 * _flown(np.array([[0.0, 0, 50], [50, 0, 50]]), 2.7, 3.0)
+    for deg in (PASS_TURN_DEG + 1, 45, 90):
+        assert _flown_leg_times(bent(deg), v, 3.0).sum() == pytest.approx(apart)
+    assert list(stops(bent(10))) == [True, False, True]
+    assert list(stops(bent(30))) == [True, True, True]
+
+
 def test_capture_speed_is_the_slowest_of_cap_interval_and_blur():
     m = Mission((Turbine.with_rotor_azimuth(90, id="T1", base=(0, 0, 0), hub_height=80,
                                             rotor_diameter=90, yaw_deg=0),), CAM)

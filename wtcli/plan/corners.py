@@ -45,11 +45,10 @@ def stops(pos: np.ndarray) -> np.ndarray:
     return turn_angles(pos) > PASS_TURN_DEG + 1e-6
 
 
-def corner_speeds(pos: np.ndarray, v_leg: np.ndarray, accel: float, corner_m: float,
-                  stop: np.ndarray | None = None) -> np.ndarray:
-    """Speed allowed through each waypoint: 0 where ``stop`` (default ``stops(pos)``), else the
-    "junction deviation" limit sqrt(a d sin(q/2) / (1 - sin(q/2))) at a turn of interior angle q
-    (straight on: q = 180 deg, no limit), and never above either leg's speed."""
+def corner_speeds(pos: np.ndarray, v_leg: np.ndarray, accel: float, corner_m: float) -> np.ndarray:
+    """Speed allowed through each waypoint: 0 where the aircraft ``stops``, else the "junction
+    deviation" limit sqrt(a d sin(q/2) / (1 - sin(q/2))) at a turn of interior angle q (straight
+    on: q = 180 deg, no limit), and never above either leg's speed."""
     P = np.asarray(pos, float)
     m = len(P)
     vc = np.zeros(m)
@@ -64,6 +63,5 @@ def corner_speeds(pos: np.ndarray, v_leg: np.ndarray, accel: float, corner_m: fl
         lim = np.where(sh > 0.9999, np.inf, np.sqrt(accel * corner_m * sh / np.maximum(1 - sh, 1e-9)))
     v_leg = np.asarray(v_leg, float)
     inner = np.minimum(np.minimum(v_leg[:-1], v_leg[1:]), lim)
-    halt = stops(P) if stop is None else np.asarray(stop, bool)
-    vc[1:-1] = np.where(halt[1:-1], 0.0, inner)
+    vc[1:-1] = np.where(stops(P)[1:-1], 0.0, inner)
     return vc
