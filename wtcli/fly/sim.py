@@ -117,7 +117,8 @@ def make_reference(t_wp: np.ndarray, pos_wp: np.ndarray, yaw_wp: np.ndarray, pit
     speed; zero-length legs (hover, turning on the spot) keep their planned duration, and a leg's
     planned time beyond flying it so is a hover at its end. Time runs behind a plan that asks
     for instant speed changes or camera turns; photos are triggered when the set-point reaches
-    their waypoint. The set-point then hovers at the last waypoint for ``settle_s`` (room for a leash's clock)."""
+    their waypoint. The set-point then hovers at the last waypoint for ``settle_s`` (room for a
+    leash's clock)."""
     tw = np.asarray(t_wp, float)
     P = np.asarray(pos_wp, float)
     seg = np.diff(P, axis=0)

@@ -50,15 +50,11 @@ def corner_speeds(pos: np.ndarray, v_leg: np.ndarray, accel: float, corner_m: fl
     deviation" limit sqrt(a d sin(q/2) / (1 - sin(q/2))) at a turn of interior angle q (straight
     on: q = 180 deg, no limit), and never above either leg's speed."""
     P = np.asarray(pos, float)
-    m = len(P)
-    vc = np.zeros(m)
-    if m < 3:
+    vc = np.zeros(len(P))
+    if len(P) < 3:
         return vc
-    seg = np.diff(P, axis=0)
-    L = np.linalg.norm(seg, axis=1)
-    u = seg / np.maximum(L, 1e-12)[:, None]
-    cos_q = np.clip(-(u[:-1] * u[1:]).sum(1), -1.0, 1.0)  # interior angle between the legs
-    sh = np.sqrt((1 - cos_q) / 2)  # sin(q/2)
+    turn = turn_angles(P)[1:-1]
+    sh = np.cos(np.radians(turn) / 2)  # sin(q/2), q = 180 deg - turn the legs' interior angle
     with np.errstate(divide="ignore", invalid="ignore"):
         lim = np.where(sh > 0.9999, np.inf, np.sqrt(accel * corner_m * sh / np.maximum(1 - sh, 1e-9)))
     v_leg = np.asarray(v_leg, float)

@@ -18,8 +18,9 @@ stopping, the photos taken in flight) or stopping at it
 (``toPointAndStopWithDiscontinuityCurvature``: sharper corners, the first and last waypoint).
 Legs stay the straight segments the clearance was checked on. ``waypointSpeed`` = the planned
 speed of the leg leaving it, heading ``smoothTransition`` to the plan's heading (an integer in
-WPML) plus, where the aircraft stops, a ``rotateYaw`` action to the exact heading where the two differ (a waypoint flown through keeps
-the whole degree, within 0.5 deg of the plan's), the gimbal pitch where it changes
+WPML) plus, where the aircraft stops, a ``rotateYaw`` action to the exact heading where the two
+differ (a waypoint flown through keeps the whole degree, within 0.5 deg of the plan's), the
+gimbal pitch where it changes
 (``gimbalRotate`` at a stop; ``gimbalEvenlyRotate`` along the leg into a waypoint flown through),
 then ``takePhoto`` at photo waypoints (file suffix = the component photographed). Finish: go home.
 """
