@@ -99,6 +99,122 @@ def test_the_aircraft_flies_through_gentle_bends_and_stops_at_sharp_corners():
     assert list(stops(bent(30))) == [True, True, True]
 
 
+def _corner(deg, leg=20.0):
+    u = np.radians(deg)
+    return (np.array([-leg, 0.0, 50.0]), np.array([0.0, 0.0, 50.0]),
+            np.array([leg * np.cos(u), leg * np.sin(u), 50.0]))
+
+
+@pytest.mark.parametrize("deg", [30, 60, 90, 120, 135])
+def test_an_arc_rounds_a_corner_in_bends_the_aircraft_flies_through(deg):
+    """corners.arc: tangent to both legs, one radius, bends under PASS_TURN_DEG (no stop
+    between the legs' far ends), legs DJI accepts (>= 0.5 m); flown at most at sqrt(a r)
+    through its waypoints and quicker than stopping at the corner."""
+    from wtcli.plan.corners import (ARC_MIN_LEG_M, ARC_STEP_DEG, arc, corner_speeds, stops,
+                                    turn_angles)
+    a, c, b = _corner(deg)
+    r = 2.5
+    q = arc(a, c, b, r)
+    chain = np.vstack([a, q, b])
+    assert list(stops(chain)) == [True] + [False] * len(q) + [True]
+    assert turn_angles(chain)[1:-1].max() <= ARC_STEP_DEG + 1e-6
+    assert np.linalg.norm(np.diff(q, axis=0), axis=1).min() >= ARC_MIN_LEG_M
+    # tangent points on the legs, as far from the corner as r tan(turn / 2)
+    tan = r * np.tan(np.radians(deg) / 2)
+    assert np.linalg.norm(q[0] - (c + tan * (a - c) / np.linalg.norm(a - c))) < 1e-9
+    assert np.linalg.norm(q[-1] - (c + tan * (b - c) / np.linalg.norm(b - c))) < 1e-9
+    inward = (b - c) / np.linalg.norm(b - c) - (c - a) / np.linalg.norm(c - a)
+    centre = c + inward / np.linalg.norm(inward) * r / np.cos(np.radians(deg) / 2)
+    assert np.linalg.norm(q - centre, axis=1) == pytest.approx(np.full(len(q), r))
+    # through the arc no faster than a sideways acceleration of ACCEL_M_S2 allows
+    vc = corner_speeds(chain, np.full(len(chain) - 1, 2.7), ACCEL_M_S2, 0.05)
+    assert (vc[1:-1] > 0).all() and (vc[1:-1] <= np.sqrt(ACCEL_M_S2 * r) * 1.02).all()
+    v = np.full(len(chain) - 1, 2.7)
+    sharp = np.array([a, c, b])
+    assert _flown_leg_times(chain, v, 3.0).sum() < _flown_leg_times(sharp, v[:2], 3.0).sum()
+
+
+def test_an_arc_is_refused_where_it_would_not_fly_through_or_fit():
+    from wtcli.plan.corners import ARC_MIN_RADIUS_M, arc
+    assert arc(*_corner(15), 2.5) is None  # flown through as it is
+    assert arc(*_corner(150), 2.5) is None  # doubling back: stays a stop
+    assert arc(*_corner(90, leg=2.0), 2.5) is None  # the tangent points beyond the legs
+    assert arc(*_corner(90), 0.5 * ARC_MIN_RADIUS_M) is None  # legs under 0.5 m
+
+
+class _Ball:
+    """A keep-out ball in place of a site: exact clearance of points and legs."""
+
+    def __init__(self, centre, radius):
+        self.c, self.r = np.asarray(centre, float), radius
+
+    def segment_clearance(self, p0, p1, step=0.5, cap=None):
+        d = p1 - p0
+        t = np.clip(((self.c - p0) * d).sum(1) / np.maximum((d * d).sum(1), 1e-12), 0, 1)
+        return np.linalg.norm(p0 + t[:, None] * d - self.c, axis=1) - self.r
+
+    def clearance(self, points, cap=None):
+        return np.linalg.norm(np.asarray(points) - self.c, axis=1) - self.r
+
+    def above_ground(self, points, height):
+        return np.asarray(points)[:, 2] >= height
+
+
+def test_round_corners_moves_the_corner_photo_onto_the_arc_and_keeps_clear():
+    """A pass's end photo at a 90 deg corner is taken on the arc (begun at the pass's station
+    before it), at its point nearest the corner (about r (sqrt 2 - 1) off), aimed as before;
+    the waypoints added are no photos, aimed in between; the corner is flown through. A
+    keep-out ball inside the corner that the legs pass but the arc would cut leaves it a stop;
+    so do ``move_photos`` False and a photo that would move by more than ARC_PHOTO_SHIFT of its
+    standoff."""
+    from wtcli.plan.corners import ARC_RADIUS_M, arc, stops
+    from wtcli.plan.paths import round_corners
+    east, north = np.array([0.0, 1.0, 0.0]), np.array([-1.0, 0.0, 0.0])
+    pas = [WP(np.array([-3.0 * k, 0.0, 50.0]), east, True, "T1/blade1/leading_edge", standoff=11.0)
+           for k in range(5, -1, -1)]  # along +x to the corner at the origin, looking north
+    join = [WP(np.array([0.0, 20.0, 50.0]), north, True, "T1/blade1/trailing_edge", standoff=11.0)]
+    ch = Chunk("T1", "blade1", pas + join)
+    far = _Ball([50.0, -50.0, 50.0], 1.0)
+    out = round_corners(ch, far, 3.0, 10.0)
+    P = np.array([w.pos for w in out.wps])
+    assert not stops(P)[1:-1].any()
+    photos = [w for w in out.wps if w.photo]
+    assert len(photos) == len(pas) + len(join)
+    moved = photos[len(pas) - 1]
+    # the arc of the greatest radius that fits: it starts at the pass's last station but one
+    r = min(ARC_RADIUS_M, 3.0)
+    corner = pas[-1].pos
+    q = arc(pas[-2].pos, corner, join[0].pos, r)
+    assert np.allclose(q[0], pas[-2].pos) and np.allclose(P[len(pas) - 1:-1], q[1:])
+    # the arc's waypoint nearest the corner: r (sqrt 2 - 1) off with an even number of bends,
+    # a little more with an odd one
+    shift = np.linalg.norm(moved.pos - corner)
+    assert shift == pytest.approx(np.linalg.norm(q - corner, axis=1).min())
+    assert r * (np.sqrt(2) - 1) - 1e-9 <= shift <= 0.5 * r
+    assert np.allclose(moved.fwd, east)
+    # its blur limit from a lower bound of its distance to what it images: the planned one
+    # less the shift, or the clearance there if nearer than planned (here nothing is near)
+    assert moved.standoff == pytest.approx(max(11.0 - shift, min(11.0, far.clearance(
+        moved.pos[None])[0])))
+    added = [w for w in out.wps if not w.photo]
+    assert added and all(abs(np.linalg.norm(w.fwd) - 1) < 1e-9 for w in added)
+    # the camera turns from the pass's aim to the join's along the way
+    yaws = [np.degrees(np.arctan2(w.fwd[0], w.fwd[1])) for w in out.wps[len(pas):-1]]
+    assert all(-90.0 - 1e-6 <= y <= 1e-6 for y in yaws) and yaws == sorted(yaws, reverse=True)
+    # a ball inside the corner 1.6 m from either leg, 1.3 m from the arc: not clear of 1.5 m
+    inside = _Ball([-2.1, 2.1, 50.0], 0.5)
+    legs = np.array([pas[0].pos, corner, join[0].pos])
+    assert inside.segment_clearance(legs[:-1], legs[1:]).min() >= 1.6 - 1e-9
+    kept = round_corners(ch, inside, 1.5, 10.0)
+    assert [w.pos.tolist() for w in kept.wps] == [w.pos.tolist() for w in ch.wps]
+    still = round_corners(ch, far, 3.0, 10.0, move_photos=False)
+    assert [w.pos.tolist() for w in still.wps] == [w.pos.tolist() for w in ch.wps]
+    # a close view (4 m from its surface) would move by a third of that: it stays a stop
+    near = replace(ch, wps=[replace(w, standoff=4.0) for w in ch.wps])
+    assert [w.pos.tolist() for w in round_corners(near, far, 3.0, 10.0).wps] == \
+        [w.pos.tolist() for w in ch.wps]
+
+
 def test_capture_speed_is_the_slowest_of_cap_interval_and_blur():
     m = Mission((Turbine.with_rotor_azimuth(90, id="T1", base=(0, 0, 0), hub_height=80,
                                             rotor_diameter=90, yaw_deg=0),), CAM)
@@ -293,3 +409,29 @@ def test_nacelle_underside_in_oblique_rows_either_side_of_the_tower_top(big_plan
     cov = measure_coverage(samples, m.camera, pos, rot, plan.summary["coverage_gsd_mm"])
     bottom = (samples.part == t.part_names().index("nacelle")) & (samples.normals[:, 2] < -0.9)
     assert cov.fraction(bottom) > 0.9
+
+
+def test_planned_corners_are_rounded_where_clear_and_the_plan_is_quicker(monkeypatch):
+    """The planner's own corners (paths.round_corners) against the same plan with every corner
+    a stop: the blades stop at most half as often (their passes flown end to end, the rest at
+    the root's detours and where they meet), the plan is quicker,
+    keeps the clearance and still meets min_side_coverage."""
+    import wtcli.plan.mission as mission
+    from wtcli.plan.corners import stops
+    t = Turbine.with_rotor_azimuth(90, id="T1", base=(0, 0, 0), hub_height=98,
+                                   rotor_diameter=150, yaw_deg=0)
+    m = Mission((t,), Camera(8192, 5460, 35, 35.9), settings=Settings())
+    rounded = plan_mission(m)
+    monkeypatch.setattr(mission, "round_corners", lambda ch, *a, **k: ch)
+    sharp = plan_mission(m)
+
+    def blade_stops(plan):
+        r = plan.routes[0]
+        s = stops(r.pos)
+        return sum(int(s[[f"/blade{k}" in str(c) for c in r.component]].sum()) for k in (1, 2, 3))
+
+    assert blade_stops(rounded) <= blade_stops(sharp) // 2, (blade_stops(rounded), blade_stops(sharp))
+    t_r, t_s = (p.summary["flight_time_sum_s"] for p in (rounded, sharp))
+    assert t_r < t_s - 30.0, (t_r, t_s)
+    assert not any(rounded.summary["violations"].values())
+    assert rounded.summary["predicted_coverage"]["T1"]["min_side"] >= m.settings.min_side_coverage

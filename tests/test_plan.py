@@ -151,7 +151,9 @@ def test_horizontal_blade_covers_every_side_and_the_rest_stays_near_full():
 
 def test_root_trailing_edge_miss_is_the_root_patch():
     """What the horizontal-blade plan misses (min_side_coverage 0: no extra rounds of gap views)
-    is a patch of trailing edge within 3 m of the root, under 3.5 % of each side. On the converged figure a
+    is a patch of trailing edge within 5 m of the root, under 3.5 % of each side (the photos
+    moved onto the arcs of rounded corners shift which extra views the search picks: 4.7 m on
+    this turbine; 3 m with every corner a stop). On the converged figure a
     brute-force search (every direction within 59 deg of the normal, every distance within 2 %
     of the GSD, keeping safe distance + margin) finds safe, clear views of parts of it: the gap
     search's cap of views per blade stops short of them (docs/plan.md, Known limits)."""
@@ -166,7 +168,7 @@ def test_root_trailing_edge_miss_is_the_root_patch():
     cov = turbine_coverage(t, CAM, pos, rot, gsd, m.settings.coverage_spacing_m, 60.0, "blades")
     missed = cov.samples[~cov.covered]
     assert len(missed) >= 1
-    assert (missed.span < 0.07).all()  # at the root: the trailing edge, and slivers where
+    assert (missed.span < 0.11).all()  # at the root: the trailing edge, and slivers where
     # the other sides enter the hub, which get no extra views once a side is predicted
     # above 99.5 % (mission.GAP_SIDE_BELOW)
     for b, sides in cov.by_blade_side().items():
@@ -1396,12 +1398,14 @@ def test_tower_columns_see_the_girth_and_one_fewer_does_not(cam, want):
 
 
 @pytest.mark.parametrize("horizontal", [False, True])
-def test_a_face_a_little_taller_than_the_frame_is_tiled_with_fewer_photos_and_all_seen(horizontal):
+def test_a_face_a_little_taller_than_the_frame_is_tiled_quicker_to_fly_and_all_seen(horizontal):
     """A nacelle face a few decimetres taller than the frame's usable height, flown in rows
-    along it, takes two rows 1.2 m apart; in columns (a side) or with the frame turned (the
-    top), fewer photos see all of it, by coverage's own test. (The top's view is tipped 1 deg
-    to fix the camera's yaw: its stations are set back along it, or the frame's far edge
-    moves 0.2 m off the face.)"""
+    along it, takes two rows 1.2 m apart, the aircraft stopping at every row's end. A side is
+    flown as one straight line instead, the camera aimed at either row in turn (one photo more,
+    no stop); the top with the frame turned (fewer photos). Every point is seen either way, by
+    coverage's own test. (The top's view is tipped 1 deg to fix the camera's yaw: its stations
+    are set back along it, or the frame's far edge moves 0.2 m off the face.)"""
+    from wtcli.plan.corners import stops
     from wtcli.plan.mission import pass_params
     from wtcli.plan.paths import FACE_BORDER, _camera_rotations, _face_rows, _face_tiling
     t = make_turbine(hub_height=98, rotor_diameter=150)
@@ -1417,7 +1421,15 @@ def test_a_face_a_little_taller_than_the_frame_is_tiled_with_fewer_photos_and_al
     rows = _face_rows(c, nrm, u, v, hu, hv, pp, tilt)
     tiled = _face_tiling(c, nrm, u, v, hu, hv, pp, tilt)
     n_rows, n_tiled = (sum(len(r[0]) for r in x) for x in (rows, tiled))
-    assert len(rows) == 2 and n_tiled < n_rows, (n_rows, n_tiled)
+    stops_rows, stops_tiled = (int(stops(np.vstack([r[0] for r in x]))[1:-1].sum())
+                               for x in (rows, tiled))
+    assert len(rows) == 2 and stops_rows >= 1
+    if horizontal:
+        assert n_tiled < n_rows, (n_rows, n_tiled)
+    else:
+        assert len(tiled) == 1 and stops_tiled == 0 and n_tiled == n_rows + 1, (n_tiled, stops_tiled)
+        pitch = np.degrees(np.arcsin(tiled[0][1][:, 2]))
+        assert (np.abs(pitch) > 1.0).all() and (np.sign(pitch[1:]) != np.sign(pitch[:-1])).all()
     # every point of the face, 10 cm apart, in some photo: frame less 2 %, the GSD's distance,
     # incidence within 60 deg (the coverage measure's test, line of sight aside: a flat face)
     a, b = np.meshgrid(np.linspace(-hu, hu, 171), np.linspace(-hv, hv, 1 + int(20 * hv)))

@@ -33,7 +33,7 @@ from wtcli.plan.config import Mission
 from wtcli.plan.corners import corner_speeds
 from wtcli.plan.paths import (GAP_ROUND_FINE_SAMPLES, WP, Chunk, PassParams, _Blocked,
                               add_gap_views, blade_chunk, connect, gap_plan, gap_views,
-                              insert_views, nacelle_chunk,
+                              insert_views, nacelle_chunk, round_corners,
                               tower_chunk)
 from wtcli.plan.clearance import Site
 from wtcli.plan.zone import initial_point, zone
@@ -147,8 +147,9 @@ def leg_speeds(wps: list[WP], sp: Speeds) -> np.ndarray:
     """The speed of each leg wps[i] -> wps[i + 1]: cruise (``slow`` False), else the capture
     speed between two photos along a pass (a longer leg between two photos is a join:
     ``Speeds.pass_leg_m``), the turn speed on the others; and no photo station is passed
-    faster than its motion-blur limit: at least one leg beside it is no faster (the flight's
-    speed at a waypoint is at most the slower of its two legs: fly's reference). A leg between
+    faster than its motion-blur limit (nor, between two inspection-speed legs, than the capture
+    speed): at least one leg beside it is no faster (the flight's speed at a waypoint is at
+    most the slower of its two legs: fly's reference). A leg between
     two photos is held to the looser of its ends' limits (along a pass, their common one); a
     station whose legs are both still faster (an extra view nearer the surface than the pass
     it sits in, a view between turns) has the shorter of them slowed to its limit, the
@@ -159,6 +160,10 @@ def leg_speeds(wps: list[WP], sp: Speeds) -> np.ndarray:
     slow = np.array([w.slow for w in wps[1:]], bool)
     photo = np.array([w.photo for w in wps], bool)
     vb = np.array([sp.blur(w.standoff) if w.photo else np.inf for w in wps])
+    # a photo between two inspection-speed legs (a pass's end photo taken on the arc into
+    # the next pass) is passed at no more than the passes' speed either
+    slow_both = np.r_[False, slow[:-1] & slow[1:], False]
+    vb = np.where(photo & slow_both, np.minimum(vb, sp.capture), vb)
     P = np.array([w.pos for w in wps])
     L = np.linalg.norm(np.diff(P, axis=0), axis=1)
     both = slow & photo[:-1] & photo[1:] & sp.is_pass_leg(L)
@@ -215,7 +220,7 @@ def turbine_chunks(t: Turbine, site: Site, pp: PassParams, mission: Mission,
         except _Blocked as e:
             raise PlanError(f"turbine {t.id}: {e} keeping {pp.required:g} m (safe distance + "
                             "tracking margin); lower the margin or check the turbine sizes") from None
-        return [c for c in out if c.wps]
+        return [_rounded(c, site, pp) for c in out if c.wps]
     ex = mission.extra(t.id)
     z = zone(t, ex.measured_tips)
     sp = initial_point(t, z)
@@ -257,7 +262,16 @@ def turbine_chunks(t: Turbine, site: Site, pp: PassParams, mission: Mission,
     except _Blocked as e:
         raise PlanError(f"turbine {t.id}: {e} keeping {pp.required:g} m (safe distance + tracking "
                         "margin); lower the margin or check the turbine sizes") from None
-    return [c for c in chunks if c.wps]
+    return [_rounded(c, site, pp) for c in chunks if c.wps]
+
+
+def _rounded(chunk: Chunk, site: Site, pp: PassParams) -> Chunk:
+    """The chunk's corners rounded (``paths.round_corners``), before coverage is predicted, so
+    the extra views make up for what a photo moved onto an arc misses. A pass's end photo moves
+    by 1-1.5 m, well within its frame's overlap with the one before; the nacelle's faces are
+    tiled to their edges, so its photo corners stay stops."""
+    return round_corners(chunk, site, pp.leg_required, pp.min_altitude,
+                         move_photos=chunk.name != "nacelle")
 
 
 def _need_stations(chunk: Chunk, pp: PassParams, key: str) -> None:
@@ -800,6 +814,9 @@ def _chunks(job: tuple) -> list[Chunk]:
         for _ in range(NACELLE_GAP_ROUNDS):
             if not _nacelle_gap_views(t, chunks, mission, site, pp, gsd_eval, reach):
                 break
+        # the corners the extra views and their detours made, rounded where no photo is
+        chunks = [round_corners(c, site, pp.leg_required, pp.min_altitude, move_photos=False)
+                  for c in chunks]
     return chunks
 
 

@@ -41,6 +41,7 @@ from wtcli.geometry import BLADE_SIDES, Camera, Turbine
 from wtcli.geometry.coverage import imaged
 from wtcli.geometry.turbine import SurfaceSamples
 from wtcli.plan.clearance import Site
+from wtcli.plan import corners
 
 Z = np.array([0.0, 0.0, 1.0])
 ALPHAS_DEG = (15.0, 25.0, 35.0, 45.0, 55.0, 65.0, 75.0)
@@ -809,17 +810,25 @@ def _back_off(site: Site, pp: PassParams, pos: np.ndarray, fwd: np.ndarray) -> n
 FACE_ROW_LAP = 0.3  # least overlap between neighbouring rows of photos on a nacelle face
 FACE_BORDER = 0.05  # frame margin a face's rows keep (coverage itself ignores 0.02)
 FACE_TURN_DEG = (15.0, 30.0, 45.0)  # a blocked face station's oblique alternatives (incidence)
+FACE_STOP_M = 3.0  # a stop costs about v / a = 1.1 s, what a pass takes to fly 3 m
+FACE_AIM_MAX_DEG = 5.0  # a view aimed this far off the face's normal loses under 0.1 m of its
+# frame's near edge at a 10 m standoff, inside FACE_BORDER
 
 
 def _face_rows(center: np.ndarray, normal: np.ndarray, u: np.ndarray, v: np.ndarray,
                half_u: float, half_v: float, pp: PassParams,
-               tilt: np.ndarray | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+               tilt: np.ndarray | None = None, aimed: bool = False
+               ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Rows of photo stations (positions, viewing directions) imaging a flat rectangular face
     head-on from ``pp.standoff``: rows along u, as many across v as the frame's extent across
     them needs (FACE_ROW_LAP overlap between rows), stations along each row from the frame's
     extent along it at ``pp.overlap``. Which frame side lies along u is the camera's as a route
     records it (compass yaw, no roll); ``tilt``: a horizontal face's view tipped 1 deg towards
-    this direction, which fixes that yaw (image rows along u)."""
+    this direction, which fixes that yaw (image rows along u). ``aimed`` (a vertical face two
+    rows tall): one line of stations along the face's middle instead, half a row's spacing
+    apart, the camera aimed at either row in turn (one more photo than two rows, no corners:
+    a stop at each of the rows' ends costs more than the photo); [] where the face needs
+    another number of rows or the rows lie more than FACE_AIM_MAX_DEG either side of it."""
     fwd = -normal if tilt is None else _unit(-normal + 0.02 * tilt)
     R = _camera_rotations(fwd[None])[0]
     fw, fh = pp.camera.footprint_m(pp.standoff)
@@ -831,6 +840,17 @@ def _face_rows(center: np.ndarray, normal: np.ndarray, u: np.ndarray, v: np.ndar
                                                         / ((1 - pp.overlap) * along))) + 1
     vs = np.linspace(-1, 1, n_v) * max(half_v - use_c / 2, 0.0)
     us = np.linspace(-1, 1, n_u) * max(half_u - use_a / 2, 0.0)
+    if aimed:
+        if n_v != 2 or n_u < 2 or tilt is not None or \
+                abs(vs[0]) > pp.standoff * math.tan(math.radians(FACE_AIM_MAX_DEG)):
+            return []
+        # rows: vs[1] at the ends and every other station between, vs[0] between them
+        step = 0.5 * (us[1] - us[0])
+        x = us[0] - step + step * np.arange(2 * n_u + 1)
+        dv = np.where(np.arange(len(x)) % 2 == 0, vs[1], vs[0])
+        pos = center + x[:, None] * u + pp.standoff * normal
+        aim = -pp.standoff * normal + dv[:, None] * v
+        return [(pos, aim / np.linalg.norm(aim, axis=1)[:, None])]
     # each station looks at its own point of the face from the standoff (along the normal):
     # set back along the tipped view so its frame is not moved 0.02 x standoff aside
     back = pp.standoff / float(-(fwd @ normal)) * fwd
@@ -845,16 +865,21 @@ def _face_rows(center: np.ndarray, normal: np.ndarray, u: np.ndarray, v: np.ndar
 def _face_tiling(center: np.ndarray, normal: np.ndarray, u: np.ndarray, v: np.ndarray,
                  half_u: float, half_v: float, pp: PassParams,
                  tilt: np.ndarray | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
-    """``_face_rows`` in the layout that needs the fewest photos, then the shortest path: rows
-    along u or along v and, on a horizontal face (``tilt`` given), the frame's longer side along
-    either (the camera's yaw). A face a little taller than the frame, flown in rows along it,
-    takes two rows about a metre apart; in columns, or with the frame turned, fewer photos."""
+    """``_face_rows`` in the layout quickest to fly, then with the fewest photos: rows along u
+    or along v, on a vertical face also one line aimed at two rows in turn, and on a horizontal
+    face (``tilt`` given) the frame's longer side along either (the camera's yaw). Quickest:
+    the shortest path with FACE_STOP_M for each corner the aircraft stops at. A face a little
+    taller than the frame, flown in rows along it, takes two rows about a metre apart, each
+    row's end a stop; one line aimed at each row in turn flies straight on."""
     options = []
     for a, b, ha, hb in ((u, v, half_u, half_v), (v, u, half_v, half_u)):
-        for t in ([None] if tilt is None else [tilt, u]):
-            rows = _face_rows(center, normal, a, b, ha, hb, pp, t)
+        for t, aimed in ([(None, False), (None, True)] if tilt is None else [(tilt, False), (u, False)]):
+            rows = _face_rows(center, normal, a, b, ha, hb, pp, t, aimed)
+            if not rows:
+                continue
             P = np.vstack([r[0] for r in rows])
-            options.append((len(P), float(np.linalg.norm(np.diff(P, axis=0), axis=1).sum()), rows))
+            length = float(np.linalg.norm(np.diff(P, axis=0), axis=1).sum())
+            options.append((length + FACE_STOP_M * int(corners.stops(P)[1:-1].sum()), len(P), rows))
     return min(options, key=lambda o: o[:2])[2]
 
 
@@ -1529,3 +1554,124 @@ def add_gap_views(chunks: list[Chunk], views: dict[int, list[tuple[np.ndarray, n
         lost = insert_views(ch, vs, site, pp)
         ch.notes.append(f"{ch.turbine}/{ch.name}: {len(vs) - lost} extra view(s) of surface the "
                         "passes miss" + (f"; {lost} no safe path reaches: dropped" if lost else ""))
+
+
+# ---- rounding the corners ---------------------------------------------------------------------
+ARC_PHOTO_SHIFT = 0.15  # a corner's photo moves onto its arc by at most this much of its
+# standoff: it sees the surface from within 9 deg of where it was planned (1.6 m at the default
+# camera's 10.8 m; a 16 mm lens's 5.1 m leaves no arc fast enough: its photo corners stop)
+def _yaw_pitch_rad(f: np.ndarray) -> tuple[float, float]:
+    return math.atan2(f[0], f[1]), math.asin(max(-1.0, min(1.0, float(f[2]))))
+
+
+def _aim(yaw: float, pitch: float) -> np.ndarray:
+    return np.array([math.sin(yaw) * math.cos(pitch), math.cos(yaw) * math.cos(pitch),
+                     math.sin(pitch)])
+
+
+def round_corners(chunk: Chunk, site: Site, leg_required: float, min_altitude: float,
+                  move_photos: bool = True) -> Chunk:
+    """``chunk`` with its corners of PASS_TURN_DEG to ROUND_MAX_DEG (``wtcli.plan.corners``)
+    replaced by ``corners.arc``s of radius ARC_RADIUS_M or as much as fits: the arc may start
+    (and end) at the waypoint beside the corner, else leaves a leg of at least ARC_MIN_LEG_M to
+    it, and takes at most the first half of a leg to another corner. Every new leg keeps
+    ``leg_required`` from every part and every arc waypoint ``min_altitude``, and a waypoint
+    flown through beside an arc stays so; else a smaller arc (x 0.75, down to
+    ARC_MIN_RADIUS_M), else the corner stays a stop. A photo at a corner is taken at the arc's
+    waypoint nearest it, at most ARC_PHOTO_SHIFT of its standoff away, aimed as before, its
+    ``standoff`` (the blur limit) a lower bound of its new distance to the surface: the planned
+    one less the shift, or the clearance there if nearer than planned. With ``move_photos`` False a photo corner stays a stop. The camera
+    turns evenly along the path between the aimed waypoints either side of an arc. The chunk's
+    first and last waypoints stay (where it meets its neighbours)."""
+    through, sharpest = corners.PASS_TURN_DEG, corners.ROUND_MAX_DEG
+    min_leg, min_r = corners.ARC_MIN_LEG_M, corners.ARC_MIN_RADIUS_M
+    wps = chunk.wps
+    if len(wps) < 3:
+        return chunk
+    P = np.array([w.pos for w in wps])
+    turn = corners.turn_angles(P)
+    cand = {i for i in range(1, len(P) - 1) if through < turn[i] <= sharpest
+            and (move_photos or not wps[i].photo)}
+    if not cand:
+        return chunk
+    out: list[WP] = [wps[0]]
+    made: set[int] = set()  # indices in ``out`` of the arcs' new waypoints
+
+    def kept_bend(before: np.ndarray, at: np.ndarray, after: np.ndarray, was: float) -> bool:
+        """A waypoint beside an arc stays flown through if it was."""
+        return was > through or corners.turn_angles(np.array([before, at, after]))[1] <= through
+
+    for i in range(1, len(P) - 1):
+        w = wps[i]
+        if i not in cand:
+            out.append(w)
+            continue
+        a, c, b = out[-1].pos, P[i], P[i + 1]
+        la, lb = float(np.linalg.norm(c - a)), float(np.linalg.norm(b - c))
+        tan = math.tan(math.radians(turn[i]) / 2)
+        # A tangent point lands on the waypoint beside the corner (the arc starts there) or
+        # leaves at least min_leg to it; on a leg to a corner still to be rounded, in its
+        # first half less that.
+        share = i + 1 in cand
+        t_b = lb / 2 - min_leg / 2 if share else lb
+        radii = [min(corners.ARC_RADIUS_M, min(la, t_b) / tan)]
+        r = min(corners.ARC_RADIUS_M, min(la - min_leg, t_b if share else lb - min_leg) / tan)
+        while r >= min_r:
+            radii.append(r)
+            r *= 0.75
+        pts = None
+        for r in radii:
+            q = corners.arc(a, c, b, r) if r >= min_r else None
+            if q is None:
+                continue
+            t = r * tan
+            on_a, on_b = t >= la - 1e-6, not share and t >= lb - 1e-6
+            if (not on_a and la - t < min_leg - 1e-9) or \
+                    (not share and not on_b and lb - t < min_leg - 1e-9):
+                continue
+            q = q[1 if on_a else 0:len(q) - 1 if on_b else len(q)]
+            chain = np.vstack([a, q, b])
+            if not ((site.segment_clearance(chain[:-1], chain[1:], LEG_STEP,
+                                            leg_required + LEG_STEP) >= leg_required).all()
+                    and site.above_ground(q, min_altitude).all()):
+                continue
+            if on_a and len(out) > 1 and not kept_bend(out[-2].pos, a, q[0], turn[i - 1]):
+                continue
+            if on_b and i + 2 < len(P) and not kept_bend(q[-1], b, P[i + 2], turn[i + 1]):
+                continue
+            if w.photo and np.linalg.norm(q - c, axis=1).min() > ARC_PHOTO_SHIFT * (
+                    w.standoff if w.standoff is not None else 0.0):
+                continue
+            pts = q
+            break
+        if pts is None:
+            out.append(w)
+            continue
+        mid = int(np.argmin(np.linalg.norm(pts - c, axis=1)))
+        for k, p in enumerate(pts):
+            if k == mid and w.photo:
+                # its distance to what it images: at least the planned one less the shift, and
+                # at least the clearance there where that is nearer than planned
+                shift = float(np.linalg.norm(p - c))
+                near = min(w.standoff, float(site.clearance(p[None])[0])) \
+                    if w.standoff is not None else None
+                out.append(replace(w, pos=p, standoff=None if w.standoff is None
+                                   else max(w.standoff - shift, near, 0.1)))
+            else:
+                made.add(len(out))
+                out.append(WP(p, None, False, w.component, w.slow))
+    out.append(wps[-1])
+    # the camera turns evenly along the path between the aimed waypoints round each arc
+    Q = np.array([w.pos for w in out])
+    s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(Q, axis=0), axis=1))]
+    aimed = [j for j, w in enumerate(out) if w.fwd is not None]
+    for j in sorted(made):
+        lo = max((k for k in aimed if k < j), default=None)
+        hi = min((k for k in aimed if k > j), default=None)
+        if lo is None or hi is None:
+            continue
+        (y0, p0), (y1, p1) = _yaw_pitch_rad(out[lo].fwd), _yaw_pitch_rad(out[hi].fwd)
+        dy = (y1 - y0 + math.pi) % (2 * math.pi) - math.pi
+        f = (s[j] - s[lo]) / max(s[hi] - s[lo], 1e-9)
+        out[j] = replace(out[j], fwd=_aim(y0 + f * dy, p0 + f * (p1 - p0)))
+    return replace(chunk, wps=out)
