@@ -140,6 +140,11 @@ def test_an_arc_is_refused_where_it_would_not_fly_through_or_fit():
     assert arc(*_corner(150), 2.5) is None  # doubling back: stays a stop
     assert arc(*_corner(90, leg=2.0), 2.5) is None  # the tangent points beyond the legs
     assert arc(*_corner(90), 0.5 * ARC_MIN_RADIUS_M) is None  # legs under 0.5 m
+    # an arc that fits its shorter leg exactly (it starts at the waypoint before the corner)
+    for deg in (37.0, 61.0, 90.0, 113.0):
+        a, c, b = _corner(deg, leg=2.9)
+        q = arc(a, c, b, 2.9 / np.tan(np.radians(deg) / 2))
+        assert q is not None and np.allclose(q[0], a) and np.allclose(q[-1], b), deg
 
 
 class _Ball:

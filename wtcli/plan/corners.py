@@ -108,7 +108,7 @@ def arc(a: np.ndarray, c: np.ndarray, b: np.ndarray, radius: float) -> np.ndarra
     phi = math.radians(turn)
     tangent = radius * math.tan(phi / 2)
     n = math.ceil(turn / ARC_STEP_DEG)
-    if tangent > min(la, lb) or 2 * radius * math.sin(phi / (2 * n)) < ARC_MIN_LEG_M:
+    if tangent > min(la, lb) + 1e-9 or 2 * radius * math.sin(phi / (2 * n)) < ARC_MIN_LEG_M:
         return None
     inward = (u2 - u1) / np.linalg.norm(u2 - u1)
     centre = c + inward * radius / math.cos(phi / 2)
