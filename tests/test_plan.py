@@ -12,7 +12,8 @@ import pytest
 from wtcli.errors import ConfigError, PlanError
 from wtcli.geometry import Camera, Turbine
 from wtcli.plan.config import Fleet, Mission, Settings, load_mission, mission_from_dict
-from wtcli.plan.mission import _yaw_pitch, plan_mission
+from wtcli.plan.mission import plan_mission
+from wtcli.plan.paths import yaw_pitch
 from wtcli.plan.zone import (azimuths_from_image_directions, azimuths_from_pitch,
                              default_photo_camera, initial_point, zone)
 from wtcli.plan_file import read_plan
@@ -106,7 +107,7 @@ def test_azimuths_from_pitch_result_of_rendered_masks():
 def test_yaw_pitch_is_what_the_camera_uses():
     for fwd in ([0, 1, 0], [1, 0, 0], [0.3, -0.2, -0.9], [-0.5, 0.5, 0.7]):
         f = np.array(fwd, float) / np.linalg.norm(fwd)
-        R = Camera.rotation_from_yaw_pitch(*_yaw_pitch(f))
+        R = Camera.rotation_from_yaw_pitch(*yaw_pitch(f))
         assert np.allclose(R[2], f, atol=1e-9)
 
 

@@ -34,7 +34,7 @@ from wtcli.plan.corners import corner_speeds
 from wtcli.plan.paths import (GAP_ROUND_FINE_SAMPLES, WP, Chunk, PassParams, _Blocked,
                               add_gap_views, blade_chunk, connect, gap_plan, gap_views,
                               insert_views, nacelle_chunk, round_corners,
-                              tower_chunk)
+                              tower_chunk, yaw_pitch)
 from wtcli.plan.clearance import Site
 from wtcli.plan.zone import initial_point, zone
 from wtcli.pitch import classify_theta
@@ -433,11 +433,6 @@ def split_balanced(costs: list[float], parts: int) -> list[tuple[int, int]]:
 
 
 # ---- routes --------------------------------------------------------------------------------------------
-def _yaw_pitch(fwd: np.ndarray) -> tuple[float, float]:
-    f = _unit(fwd)
-    yaw = math.degrees(math.atan2(f[0], f[1])) % 360.0
-    pitch = math.degrees(math.asin(max(-1.0, min(1.0, float(f[2])))))
-    return yaw, pitch
 
 
 def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Mission, site: Site,
@@ -723,7 +718,7 @@ def _coverage_from_chunks(t: Turbine, chunks: list[Chunk], camera: Camera, gsd_m
                           spacing: float, max_incidence: float, parts: str = "blades") -> Coverage:
     """``turbine_coverage`` of the chunks' photo stations, posed as the routes will record them."""
     pos = np.array([w.pos for c in chunks for w in c.wps if w.photo]).reshape(-1, 3)
-    rot = np.array([_rotation(*(round(v, 6) for v in _yaw_pitch(w.fwd)))
+    rot = np.array([_rotation(*(round(v, 6) for v in yaw_pitch(w.fwd)))
                     for c in chunks for w in c.wps if w.photo]).reshape(-1, 3, 3)
     return turbine_coverage(t, camera, pos, rot, gsd_mm, spacing, max_incidence, parts)
 

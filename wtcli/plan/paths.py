@@ -1560,13 +1560,15 @@ def add_gap_views(chunks: list[Chunk], views: dict[int, list[tuple[np.ndarray, n
 ARC_PHOTO_SHIFT = 0.15  # a corner's photo moves onto its arc by at most this much of its
 # standoff: it sees the surface from within 9 deg of where it was planned (1.6 m at the default
 # camera's 10.8 m; a 16 mm lens's 5.1 m leaves no arc fast enough: its photo corners stop)
-def _yaw_pitch_rad(f: np.ndarray) -> tuple[float, float]:
-    return math.atan2(f[0], f[1]), math.asin(max(-1.0, min(1.0, float(f[2]))))
 
 
-def _aim(yaw: float, pitch: float) -> np.ndarray:
-    return np.array([math.sin(yaw) * math.cos(pitch), math.cos(yaw) * math.cos(pitch),
-                     math.sin(pitch)])
+def yaw_pitch(fwd: np.ndarray) -> tuple[float, float]:
+    """A viewing direction as the route records it: compass yaw (0-360 deg, 0 = north) and
+    elevation (deg, positive up); ``Camera.rotation_from_yaw_pitch`` is its inverse."""
+    f = _unit(fwd)
+    yaw = math.degrees(math.atan2(f[0], f[1])) % 360.0
+    pitch = math.degrees(math.asin(max(-1.0, min(1.0, float(f[2])))))
+    return yaw, pitch
 
 
 def round_corners(chunk: Chunk, site: Site, leg_required: float, min_altitude: float,
@@ -1580,9 +1582,10 @@ def round_corners(chunk: Chunk, site: Site, leg_required: float, min_altitude: f
     ARC_MIN_RADIUS_M), else the corner stays a stop. A photo at a corner is taken at the arc's
     waypoint nearest it, at most ARC_PHOTO_SHIFT of its standoff away, aimed as before, its
     ``standoff`` (the blur limit) a lower bound of its new distance to the surface: the planned
-    one less the shift, or the clearance there if nearer than planned. With ``move_photos`` False a photo corner stays a stop. The camera
-    turns evenly along the path between the aimed waypoints either side of an arc. The chunk's
-    first and last waypoints stay (where it meets its neighbours)."""
+    one less the shift, or the clearance there if nearer than planned. With ``move_photos``
+    False a photo corner stays a stop. The camera turns evenly along the path between the aimed
+    waypoints either side of an arc. The chunk's first and last waypoints stay (where it meets
+    its neighbours)."""
     through, sharpest = corners.PASS_TURN_DEG, corners.ROUND_MAX_DEG
     min_leg, min_r = corners.ARC_MIN_LEG_M, corners.ARC_MIN_RADIUS_M
     wps = chunk.wps
@@ -1670,8 +1673,9 @@ def round_corners(chunk: Chunk, site: Site, leg_required: float, min_altitude: f
         hi = min((k for k in aimed if k > j), default=None)
         if lo is None or hi is None:
             continue
-        (y0, p0), (y1, p1) = _yaw_pitch_rad(out[lo].fwd), _yaw_pitch_rad(out[hi].fwd)
-        dy = (y1 - y0 + math.pi) % (2 * math.pi) - math.pi
+        (y0, p0), (y1, p1) = yaw_pitch(out[lo].fwd), yaw_pitch(out[hi].fwd)
+        dy = (y1 - y0 + 180.0) % 360.0 - 180.0
         f = (s[j] - s[lo]) / max(s[hi] - s[lo], 1e-9)
-        out[j] = replace(out[j], fwd=_aim(y0 + f * dy, p0 + f * (p1 - p0)))
+        aim = Camera.rotation_from_yaw_pitch(y0 + f * dy, p0 + f * (p1 - p0))[2]  # its forward
+        out[j] = replace(out[j], fwd=aim)
     return replace(chunk, wps=out)
