@@ -20,10 +20,12 @@ since consecutive frames are near-duplicates.
   SEQ --out DIR/SEQ`` (a stopped fold resumed), so cross-validation is one command.
 
 Each photo is segmented as ``segment`` does by default (second look for small turbines, mirror
-pass, edge refiner) and scored against its semantic mask: blade IoU (blade instances' union
-against class 1), tower IoU (tower and nacelle against class 2, which holds the nacelle and the
-hub), and nacelle IoU on the photos where ``split_semantic`` tells a nacelle apart (a heuristic
-truth). IoU is per photo where the prediction or the truth has the class, then averaged: per
+pass, edge refiner) and its class map (``classes/NAME.png``: one class a pixel, nacelle over
+tower over blade where masks overlap, ``Instances.class_map``) scored against its semantic mask:
+blade IoU (class 1 against class 1), tower IoU (tower and nacelle against class 2, which holds
+the nacelle and the hub), and nacelle IoU on the photos where ``split_semantic`` tells a nacelle
+apart (a heuristic truth); ``*_iou_union`` beside them score the classes' instance unions
+instead (a pixel in masks of two classes counts for both). IoU is per photo where the prediction or the truth has the class, then averaged: per
 view type (``wtcli.segment.real.VIEW_TYPES``), per fold and pooled. Front and front-oblique
 views whose truth splits into exactly three blades at one hub: the share where pitch reads
 exactly three blades, and the blade-angle error against pitch run on the split truth (each true
@@ -123,17 +125,21 @@ def measure(photo: R.RealPhoto, model, args) -> dict:
     img, sem = R.read_pair(photo, args.max_side)
     inst = segment_image(img, model, refine=not args.no_refine)
     conf = inst[inst.scores >= 0.5] if len(inst) else inst
-    h, w = sem.shape
-    empty = np.zeros((h, w), bool)
-    blade = conf.of("blade").union() if len(conf) else empty
-    nac = conf.of("nacelle").union() if len(conf) else empty
-    tower = (conf.of("tower").union() | nac) if len(conf) else empty
+    # The class map segment writes (classes/NAME.png): one class a pixel, as the truth has.
+    cmap = conf.class_map()
+    blade, tower, nac = cmap == 1, cmap >= 2, cmap == 3
+    # The classes' unions beside it: a pixel in masks of two classes counts for both.
+    u_blade, u_nac = conf.of("blade").union(), conf.of("nacelle").union()
+    u_tower = conf.of("tower").union() | u_nac
     rec = {"image": photo.name, "sequence": photo.sequence, "view": photo.view,
-           "blade_iou": iou(blade, sem == R.BLADE), "tower_iou": iou(tower, sem == R.TOWER)}
+           "blade_iou": iou(blade, sem == R.BLADE), "tower_iou": iou(tower, sem == R.TOWER),
+           "blade_iou_union": iou(u_blade, sem == R.BLADE),
+           "tower_iou_union": iou(u_tower, sem == R.TOWER)}
     split = R.split_semantic(sem)
     true_nac = split.instances.of("nacelle")
     if len(true_nac):
         rec["nacelle_iou"] = iou(nac, true_nac.union())
+        rec["nacelle_iou_union"] = iou(u_nac, true_nac.union())
     if photo.view in FRONT_VIEWS:
         truth = front_truth(split)
         if truth is not None:
@@ -153,6 +159,8 @@ def summarise(rows: list[dict]) -> dict:
         v = [r[key] for r in rows if r.get(key) is not None]
         out[key] = round(float(np.mean(v)), 4) if v else None
         out[key.replace("_iou", "_photos")] = len(v)
+        u = [r[key + "_union"] for r in rows if r.get(key + "_union") is not None]
+        out[key + "_union"] = round(float(np.mean(u)), 4) if u else None
     front = [r for r in rows if "front_blades" in r]
     if front:
         errs = [e for r in front for e in r.get("angle_errors", [])]
@@ -246,10 +254,13 @@ def main(argv: list[str] | None = None) -> dict:
         "seconds": round(secs, 1), "seconds_per_photo": round(secs / max(1, len(rows)), 2),
         "per_photo": rows,
     }
-    print(f"{'view':14s} {'photos':>6s} {'blade':>6s} {'tower':>6s} {'nacelle':>8s}")
+    keys = ("blade_iou", "tower_iou", "nacelle_iou")
+    print(f"{'view':14s} {'photos':>6s} {'blade':>6s} {'tower':>6s} {'nacelle':>8s}   "
+          "(instance unions: blade / tower / nacelle)")
     for v, s in [*res["per_view"].items(), ("pooled", res["pooled"])]:
-        f = [("-" if s[k] is None else f"{s[k]:.3f}") for k in ("blade_iou", "tower_iou", "nacelle_iou")]
-        print(f"{v:14s} {s['photos']:6d} {f[0]:>6s} {f[1]:>6s} {f[2]:>8s}")
+        f = [("-" if s[k] is None else f"{s[k]:.3f}") for k in keys]
+        u = " / ".join("-" if s[k + "_union"] is None else f"{s[k + '_union']:.3f}" for k in keys)
+        print(f"{v:14s} {s['photos']:6d} {f[0]:>6s} {f[1]:>6s} {f[2]:>8s}   ({u})")
     p = res["pooled"]
     if "front_exactly_3" in p:
         print(f"front views with 3 true blades: {p['front_views_3_true_blades']}, exactly 3 read "

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from wtcli.errors import InputError
-from wtcli.masks import (Instances, polygons_decode, polygons_encode, read_instances, rle_decode,
+from wtcli.masks import (CATEGORIES, Instances, polygons_decode, polygons_encode, read_instances, rle_decode,
                          rle_encode, write_instances)
 
 
@@ -121,3 +121,21 @@ def test_check_declared_size_refuses_a_huge_tiff(tmp_path):
         check_declared_size(_as_array(b), tmp_path / "x.tif")
     b = b.replace(struct.pack("<I", 10001), struct.pack("<I", 10000))  # exactly 200 MP: allowed
     check_declared_size(_as_array(b), tmp_path / "x.tif")
+
+
+def test_class_map_gives_each_pixel_one_class_nacelle_over_tower_over_blade():
+    m = np.zeros((4, 6, 8), bool)
+    m[0, 1:4, 0:6] = True  # a blade running on under the hub, the tower and the nacelle
+    m[1, 2:6, 4:6] = True  # tower
+    m[2, 0:3, 5:8] = True  # nacelle, over the blade's root and the tower's top
+    m[3, 5, 0] = True  # a second blade, alone
+    inst = Instances(np.array(["blade", "tower", "nacelle", "blade"], dtype=object), m)
+    cmap = inst.class_map()
+    assert cmap.dtype == np.uint8 and cmap.shape == (6, 8)
+    assert (cmap[m[2]] == 3).all()  # the nacelle shows wherever it is
+    assert (cmap[m[1] & ~m[2]] == 2).all()  # the tower wherever no nacelle is
+    assert (cmap[m[0] & ~m[1] & ~m[2]] == 1).all() and cmap[5, 0] == 1
+    assert (cmap[~m.any(0)] == 0).all()
+    # the category ids of the instances file
+    assert [c["id"] for c in CATEGORIES if c["name"] in ("blade", "tower", "nacelle")] == [1, 2, 3]
+    assert (Instances.empty(3, 4).class_map() == 0).all()

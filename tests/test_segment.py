@@ -227,6 +227,12 @@ def test_segment_folder_writes_everything(cli, photo_folder, random_weights, tmp
         assert (out / "instances" / f"{stem}.json").is_file()
     items = read_instances(out / "instances.json")
     assert [img["file_name"] for img, _ in items] == ["a.png", "b.jpg"]
+    for (img, inst), stem in zip(items, ("a", "b")):
+        # the class map: one channel, each pixel the class of the instances file's masks
+        cmap = cv2.imread(str(out / "classes" / f"{stem}.png"), cv2.IMREAD_UNCHANGED)
+        assert cmap.shape == (120, 160) and cmap.dtype == np.uint8
+        assert np.array_equal(cmap, inst.class_map())
+        assert ((cmap > 0) == inst.union()).all()
     doc = json.loads((out / "instances.json").read_text())
     for a in doc["annotations"]:
         assert isinstance(a["segmentation"]["counts"], list) and "score" in a and len(a["bbox"]) == 4
@@ -910,3 +916,19 @@ def test_flip_gives_the_mirror_image_the_mirrored_answer():
     assert np.median(d) < 0.5 and (d.max(axis=1) >= 1.5).sum() <= 1 and d.max() < 10
     for i in range(len(a)):
         assert mask_iou(a.masks[i], b.masks[i][:, ::-1]) > 0.93
+
+def test_evaluator_scores_the_class_map_beside_the_classes_unions():
+    from wtcli.segment.evaluate import Evaluator
+
+    truth = np.zeros((2, 20, 30), bool)
+    truth[0, 5:8, 0:12] = True  # a blade, its root hidden by the tower
+    truth[1, 0:20, 12:16] = True  # the tower in front of it
+    pred = truth.copy()
+    pred[0, 5:8, 0:16] = True  # the network's blade runs on under the tower
+    labels = np.array(["blade", "tower"], dtype=object)
+    ev = Evaluator(0.5)
+    ev.add(Instances(labels, pred, np.array([0.9, 0.9])), Instances(labels, truth))
+    s = ev.summary()
+    assert s["blade_mask_iou"] == pytest.approx(36 / 48)  # the union counts the hidden root
+    assert s["blade_class_map_iou"] == 1.0 and s["tower_class_map_iou"] == 1.0
+    assert s["nacelle_class_map_iou"] is None

@@ -16,7 +16,7 @@ def segment(
                                 help="A photo (jpg/png/tif) or a folder of them."),
     out: Path = typer.Option(Path("segment-out"), "--out", "-o",
                              help="Output folder (created): instances.json, report.json, "
-                                  "instances/, background_removed/, overlay/."),
+                                  "instances/, background_removed/, overlay/, classes/."),
     score_threshold: float = typer.Option(DEFAULT_SCORE_THRESHOLD, "--score-threshold", min=0.0,
                                           max=1.0, help="Keep instances scoring at least this."),
     max_size: int = typer.Option(DEFAULT_MAX_SIZE, "--max-size", min=64,

@@ -3,9 +3,12 @@
 For each image ``REL`` (its path relative to the input folder, or its name), under ``OUT``:
 
 - ``instances/REL.json``: that image's instances (COCO-compatible, uncompressed RLE, scores,
-  boxes), written when the image is done; ``--resume`` skips images whose three files exist;
+  boxes), written when the image is done; ``--resume`` skips images whose four files exist;
 - ``background_removed/REL.png``: I_t, the photo with everything but the turbine black;
 - ``overlay/REL.png``: the photo with the instances drawn on it;
+- ``classes/REL.png``: the class map, each pixel's category id (0 background, 1 blade, 2 tower,
+  3 nacelle) from the instances scoring the threshold, one class a pixel
+  (``Instances.class_map``), to compare with semantic labels;
 
 and once the batch ends, ``instances.json`` (every finished image in one COCO file, ready for
 ``contours`` and ``pitch``) and ``report.json`` (per file: ok / error, counts, what was found,
@@ -107,7 +110,8 @@ def output_paths(out: Path, rel: str) -> dict[str, Path]:
     stem = str(Path(rel).with_suffix(""))
     return {"instances": out / "instances" / f"{stem}.json",
             "background_removed": out / "background_removed" / f"{stem}.png",
-            "overlay": out / "overlay" / f"{stem}.png"}
+            "overlay": out / "overlay" / f"{stem}.png",
+            "classes": out / "classes" / f"{stem}.png"}
 
 
 def read_image(path: Path) -> np.ndarray:
@@ -179,6 +183,8 @@ def segment_paths(path: Path, out: Path, segment: Callable[[np.ndarray], Instanc
 
                 atomic_write_bytes(outs["background_removed"], _png(remove_background(img, inst)))
                 atomic_write_bytes(outs["overlay"], _png(overlay(img, inst)))
+                sure = inst[inst.scores >= score_threshold] if len(inst) else inst
+                atomic_write_bytes(outs["classes"], _png(sure.class_map()))
                 # The instances file last: its presence marks the image as done for --resume.
                 write_instances(outs["instances"], [_image_record(1, rel, f, res)], [inst])
             res.counts = counts_of(res.instances)

@@ -1,5 +1,6 @@
 """Segmentation metrics against ground-truth instances: per-class mask IoU (of the class's
-union mask, per image, averaged over images where the class is present in either), AP50 per
+union mask, per image, averaged over images where the class is present in either; and the same
+on the class maps, one class a pixel, ``Instances.class_map``), AP50 per
 class (greedy matching by score at mask IoU >= 0.5, VOC-style all-point interpolation) and
 blade-count accuracy."""
 
@@ -53,6 +54,7 @@ class Evaluator:
     def __init__(self, score_threshold: float = DEFAULT_SCORE_THRESHOLD):
         self.t = score_threshold
         self.ious: dict[str, list[float]] = {l: [] for l in LABELS}
+        self.map_ious: dict[str, list[float]] = {l: [] for l in LABELS}
         self.det: dict[str, list[tuple[float, bool]]] = {l: [] for l in LABELS}
         self.n_gt = {l: 0 for l in LABELS}
         self.n = 0
@@ -61,12 +63,16 @@ class Evaluator:
         self.n += 1
         confident = pred[pred.scores >= self.t] if len(pred) else pred
         per = {}
-        for l in LABELS:
+        pmap, gmap = confident.class_map(), truth.class_map()
+        for k, l in enumerate(LABELS, 1):
             g, p = truth.of(l), confident.of(l)
             if len(g) or len(p):
                 iou = mask_iou(p.union(), g.union())
                 self.ious[l].append(iou)
                 per[l] = iou
+            pk, gk = pmap == k, gmap == k
+            if pk.any() or gk.any():
+                self.map_ious[l].append(mask_iou(pk, gk))
             pl, gl = pred.of(l), truth.of(l)
             self.n_gt[l] += len(gl)
             ious = _pairwise_iou(pl.masks, gl.masks)
@@ -86,6 +92,8 @@ class Evaluator:
         for l in LABELS:
             v = self.ious[l]
             out[f"{l}_mask_iou"] = float(np.mean(v)) if v else None
+            m = self.map_ious[l]
+            out[f"{l}_class_map_iou"] = float(np.mean(m)) if m else None
             ap = average_precision([s for s, _ in self.det[l]], [h for _, h in self.det[l]], self.n_gt[l])
             out[f"{l}_ap50"] = ap
         return out
