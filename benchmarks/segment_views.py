@@ -1,6 +1,6 @@
 """The shipped segmenter on the wider views an inspection folder holds, on renders no run saw.
 
-    python benchmarks/segment_views.py [--n 20] [--model PATH] [--threads 2] [--out FILE]
+    python benchmarks/segment_views.py [--n 20] [--n-sizes 40] [--model PATH] [--threads 2] [--out FILE]
 
 For each of the renderer's wider views (``wtcli.synth.WIDE_VIEWS``, docs/synth.md: blade
 close-ups against ground, sea and sky; nadir and steep-down views with spare blades and tracks
@@ -18,6 +18,13 @@ second look, mirror pass, refiner). Per view, averaged over its renders:
   (issue #43: "nadir views no longer produce blades on the tower");
 - blade read as tower: the share of the true blades' pixels under a tower or nacelle instance
   (spare blades on the ground taken for towers, a blade in front of the tower read as tower).
+
+Then whole turbines at two photo sizes, the held-out set's mix (every other render a front view,
+the rest the renderer's draw): ``--n-sizes`` renders at 1920 x 1080, the size of the real photos
+(``render_sample(9_700_000 + i, 1920, 1080, view)``), and as many at 768 x 576, the size the
+network trained at (``9_700_500 + i``): the same figures, and the renders where blade instances
+cover FALSE_BLADE or more of the frame outside the true blades (a patch of sky, haze or a hill
+read as a blade), the comparison printed as a ratio.
 
 Results are printed and written as JSON (``--out``, default
 benchmarks/results/segment_views.json) with the command, date and machine; ``docs/benchmarks.md``
@@ -44,6 +51,9 @@ SEED_BASE = 9_600_000
 WIDTH, HEIGHT = 768, 576
 SURE = 0.5  # what segment reports
 ON_TOWER = 0.10  # a render "reads its tower as blade" when this share of the tower is under a blade
+SIZE_SEED_BASE = 9_700_000
+SIZES = {"1920x1080": (1920, 1080, 0), "768x576": (768, 576, 500)}  # width, height, seed offset
+FALSE_BLADE = 0.03  # share of the frame under blades outside the true blades: "a false blade"
 
 
 def _union(inst, labels: tuple[str, ...]) -> np.ndarray:
@@ -61,7 +71,8 @@ def measure(inst, truth) -> dict:
     pb, pt, pn = _union(inst, ("blade",)), _union(inst, ("tower",)), _union(inst, ("nacelle",))
     tb, tt, tn = (truth.of(c).union() for c in ("blade", "tower", "nacelle"))
     return {"blade_iou": iou(pb, tb), "tower_iou": iou(pt, tt), "nacelle_iou": iou(pn, tn),
-            "tower_as_blade": _share(pb, tt), "blade_as_tower": _share(pt | pn, tb)}
+            "tower_as_blade": _share(pb, tt), "blade_as_tower": _share(pt | pn, tb),
+            "false_blade": float(np.count_nonzero(pb & ~tb) / pb.size)}
 
 
 def summarise(rows: list[dict]) -> dict:
@@ -72,21 +83,24 @@ def summarise(rows: list[dict]) -> dict:
     on = [r["tower_as_blade"] for r in rows if r["tower_as_blade"] is not None]
     out["renders_with_tower"] = len(on)
     out["tower_as_blade_renders"] = round(float(np.mean([v >= ON_TOWER for v in on])), 4) if on else None
+    out["false_blade_renders"] = int(sum(r["false_blade"] >= FALSE_BLADE for r in rows))
     return out
 
 
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=20, help="renders per view")
+    ap.add_argument("--n-sizes", type=int, default=40,
+                    help="whole-turbine renders at each photo size")
     ap.add_argument("--model", default=None, help="segmenter weights (default: the shipped model)")
     ap.add_argument("--threads", type=int, default=None, help="torch CPU threads")
     ap.add_argument("--out", default=None,
                     help="results file (default benchmarks/results/segment_views.json; needed "
                          "with --model or another --n)")
     args = ap.parse_args(argv)
-    if args.out is None and (args.model or args.n != 20):
-        ap.error("--out FILE is needed with --model or another --n (the default results file "
-                 "holds the shipped model's figures on 20 renders a view)")
+    if args.out is None and (args.model or args.n != 20 or args.n_sizes != 40):
+        ap.error("--out FILE is needed with --model, another --n or --n-sizes (the default "
+                 "results file holds the shipped model's figures on 20 renders a view, 40 a size)")
     import torch
 
     from wtcli.segment.infer import load_model, segment_image
@@ -113,10 +127,25 @@ def main(argv: list[str] | None = None) -> dict:
               f"({v['tower_as_blade_renders']} of renders >= {ON_TOWER:.0%})  "
               f"blade as tower {v['blade_as_tower']}  [{time.perf_counter() - t0:.0f} s]",
               flush=True)
+    per_size = {}
+    for name, (w, h, offset) in SIZES.items():
+        rows = []
+        for i in range(args.n_sizes):
+            s = render_sample(SIZE_SEED_BASE + offset + i, w, h, view="front" if i % 2 == 0 else None)
+            rows.append(measure(segment_image(s.image, model), s.instances))
+        per_size[name] = v = summarise(rows)
+        print(f"whole turbines at {name}: {args.n_sizes} renders  blade {v['blade_iou']}  tower "
+              f"{v['tower_iou']}  nacelle {v['nacelle_iou']}  with a false blade (>= "
+              f"{FALSE_BLADE:.0%} of the frame) {v['false_blade_renders']}  "
+              f"[{time.perf_counter() - t0:.0f} s]", flush=True)
+    big, small = (per_size[k]["false_blade_renders"] for k in SIZES)
+    print(f"false blades at the real photos' size against the training size: {big} / {small}"
+          + (f" = {big / small:.1f}x" if small else ""))
     res = {"model": str(weights.relative_to(ROOT) if weights.is_relative_to(ROOT) else weights),
-           "settings": {"n_per_view": args.n, "width": WIDTH, "height": HEIGHT,
-                        "seed_base": SEED_BASE, "score_threshold": SURE, "on_tower": ON_TOWER},
-           "per_view": per_view, "pooled": summarise(rows_all),
+           "settings": {"n_per_view": args.n, "n_per_size": args.n_sizes, "width": WIDTH,
+                        "height": HEIGHT, "seed_base": SEED_BASE, "score_threshold": SURE, "on_tower": ON_TOWER,
+                        "size_seed_base": SIZE_SEED_BASE, "sizes": SIZES, "false_blade": FALSE_BLADE},
+           "per_view": per_view, "pooled": summarise(rows_all), "per_size": per_size,
            "seconds": round(time.perf_counter() - t0, 1)}
     save("segment_views", res, argv=argv, out=args.out, script=__file__)
     return res
