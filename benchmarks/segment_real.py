@@ -25,8 +25,9 @@ tower over blade where masks overlap, ``Instances.class_map``) scored against it
 blade IoU (class 1 against class 1), tower IoU (tower and nacelle against class 2, which holds
 the nacelle and the hub), and nacelle IoU on the photos where ``split_semantic`` tells a nacelle
 apart (a heuristic truth); ``*_iou_union`` beside them score the classes' instance unions
-instead (a pixel in masks of two classes counts for both). IoU is per photo where the prediction or the truth has the class, then averaged: per
-view type (``wtcli.segment.real.VIEW_TYPES``), per fold and pooled. Front and front-oblique
+instead (a pixel in masks of two classes counts for both). IoU is per photo where the
+prediction or the truth has the class, then averaged: per view type
+(``wtcli.segment.real.VIEW_TYPES``), per fold and pooled. Front and front-oblique
 views whose truth splits into exactly three blades at one hub: the share where pitch reads
 exactly three blades, and the blade-angle error against pitch run on the split truth (each true
 blade matched to the measured one of nearest phi; theta mod 180, phi mod 360).

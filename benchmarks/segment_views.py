@@ -1,6 +1,7 @@
 """The shipped segmenter on the wider views an inspection folder holds, on renders no run saw.
 
-    python benchmarks/segment_views.py [--n 20] [--n-sizes 40] [--model PATH] [--threads 2] [--out FILE]
+    python benchmarks/segment_views.py [--n 20] [--n-sizes 40] [--model PATH] [--threads 2]
+                                       [--out FILE]
 
 For each of the renderer's wider views (``wtcli.synth.WIDE_VIEWS``, docs/synth.md: blade
 close-ups against ground, sea and sky; nadir and steep-down views with spare blades and tracks
@@ -96,7 +97,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--threads", type=int, default=None, help="torch CPU threads")
     ap.add_argument("--out", default=None,
                     help="results file (default benchmarks/results/segment_views.json; needed "
-                         "with --model or another --n)")
+                         "with --model, another --n or --n-sizes)")
     args = ap.parse_args(argv)
     if args.out is None and (args.model or args.n != 20 or args.n_sizes != 40):
         ap.error("--out FILE is needed with --model, another --n or --n-sizes (the default "
@@ -131,7 +132,8 @@ def main(argv: list[str] | None = None) -> dict:
     for name, (w, h, offset) in SIZES.items():
         rows = []
         for i in range(args.n_sizes):
-            s = render_sample(SIZE_SEED_BASE + offset + i, w, h, view="front" if i % 2 == 0 else None)
+            which = "front" if i % 2 == 0 else None  # the held-out set's mix
+            s = render_sample(SIZE_SEED_BASE + offset + i, w, h, view=which)
             rows.append(measure(segment_image(s.image, model), s.instances))
         per_size[name] = v = summarise(rows)
         print(f"whole turbines at {name}: {args.n_sizes} renders  blade {v['blade_iou']}  tower "
@@ -143,8 +145,9 @@ def main(argv: list[str] | None = None) -> dict:
           + (f" = {big / small:.1f}x" if small else ""))
     res = {"model": str(weights.relative_to(ROOT) if weights.is_relative_to(ROOT) else weights),
            "settings": {"n_per_view": args.n, "n_per_size": args.n_sizes, "width": WIDTH,
-                        "height": HEIGHT, "seed_base": SEED_BASE, "score_threshold": SURE, "on_tower": ON_TOWER,
-                        "size_seed_base": SIZE_SEED_BASE, "sizes": SIZES, "false_blade": FALSE_BLADE},
+                        "height": HEIGHT, "seed_base": SEED_BASE, "score_threshold": SURE,
+                        "on_tower": ON_TOWER, "size_seed_base": SIZE_SEED_BASE, "sizes": SIZES,
+                        "false_blade": FALSE_BLADE},
            "per_view": per_view, "pooled": summarise(rows_all), "per_size": per_size,
            "seconds": round(time.perf_counter() - t0, 1)}
     save("segment_views", res, argv=argv, out=args.out, script=__file__)

@@ -24,7 +24,8 @@ CATEGORIES = [{"id": i + 1, "name": n, "supercategory": "wind_turbine"} for i, n
 # A pixel shows one part. A segmenter's blade mask runs on under what covers the blade's root or
 # middle (hub and nacelle; the tower in front of the lower blade seen from behind): on 100
 # development renders such overlaps were truly tower 2:1 and nacelle 2.6:1 (docs/segment.md).
-CLASS_MAP_ORDER = ("blade", "tower", "nacelle")  # painted in this order: nacelle over tower over blade
+# Painted in this order: nacelle over tower over blade.
+CLASS_MAP_ORDER = ("blade", "tower", "nacelle")
 INSTANCES_SCHEMA = "wtinspect.instances"
 INSTANCES_VERSION = 1
 # The largest image (width x height) an instances file may declare: 200 megapixels, above the
