@@ -28,8 +28,9 @@
    natively, as ``segment`` does); the stock one in float32, as torchvision ships it; when ours
    runs in bf16, its float32 speed and ratio are reported beside.
 3. Real photos, when ``--real`` (default ../shared/real-photos beside the repo) exists: blade and tower IoU
-   against its semantic masks (0 background, 1 blade, 2 tower incl. nacelle/hub; our tower
-   prediction = tower ∪ nacelle), and the blade count on the photos the manifest tags as front
+   of the class map (one class a pixel, as ``segment_real.py`` scores it) against its semantic
+   masks (0 background, 1 blade, 2 tower incl. nacelle/hub; our tower = tower ∪ nacelle), and
+   the blade count on the photos the manifest tags as front
    views (with and without completion); skipped when the model trained on real photos (its
    meta names them), whose figures come from ``segment_real.py``, cross-validated by flight
    sequence. Never copy the photos into the repo.
@@ -73,6 +74,7 @@ from wtcli.segment.infer import load_model, predict, second_look, wide_look  # n
 from wtcli.segment.post import absorb_blade_ends  # noqa: E402
 from wtcli.segment.model import resolve_weights  # noqa: E402
 from wtcli.segment.refine import load_refiner, refine_edges, resolve_refiner  # noqa: E402
+from segment_real import class_parts  # noqa: E402  (the photos scored as segment_real scores them)
 
 ROOT = Path(__file__).resolve().parents[1]
 # The blade count is also split by how much of the frame the rotor spans (its diameter /
@@ -372,21 +374,18 @@ def real_photos(model, root: Path, log, refiner=None) -> dict:
             sem = cv2.resize(sem, (img.shape[1], img.shape[0]), interpolation=cv2.INTER_NEAREST)
         low = predict(model, img, score_threshold=CANDIDATE_FLOOR)
         pred = low[low.scores >= 0.5] if len(low) else low  # = predicting at 0.5
-        blade = pred.of("blade").union() if len(pred) else np.zeros(sem.shape, bool)
-        tower = (pred.of("tower").union() | pred.of("nacelle").union()) if len(pred) else np.zeros(sem.shape, bool)
+        blade, tower, _ = class_parts(pred)
         blade_iou.append(mask_iou(blade, sem == 1))
         tower_iou.append(mask_iou(tower, sem == 2))
         zlow = absorb_blade_ends(looks(model, img, low), 0.5)
         zpred = zlow[zlow.scores >= 0.5] if len(zlow) else zlow
-        zblade = zpred.of("blade").union() if len(zpred) else np.zeros(sem.shape, bool)
-        ztower = (zpred.of("tower").union() | zpred.of("nacelle").union()) if len(zpred) else np.zeros(sem.shape, bool)
+        zblade, ztower, _ = class_parts(zpred)
         zoom["blade_iou"].append(mask_iou(zblade, sem == 1))
         zoom["tower_iou"].append(mask_iou(ztower, sem == 2))
         if refiner is not None:
             for key, inst in (("", pred), ("zoom_", zpred)):
                 r = refine_edges(refiner, img, inst)
-                rb = r.of("blade").union() if len(r) else np.zeros(sem.shape, bool)
-                rt = (r.of("tower").union() | r.of("nacelle").union()) if len(r) else np.zeros(sem.shape, bool)
+                rb, rt, _ = class_parts(r)
                 ref[key + "blade_iou"].append(mask_iou(rb, sem == 1))
                 ref[key + "tower_iou"].append(mask_iou(rt, sem == 2))
             if "front" in view.lower():

@@ -64,6 +64,13 @@ def iou(a: np.ndarray, b: np.ndarray) -> float | None:
     return float(np.logical_and(a, b).sum() / u) if u else None
 
 
+def class_parts(conf) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(blade, tower with nacelle, nacelle) as the class map ``segment`` writes shows them (one
+    class a pixel, ``Instances.class_map``), to score against a semantic mask."""
+    cmap = conf.class_map()
+    return cmap == 1, cmap >= 2, cmap == 3
+
+
 def model_for_fold(args, seq: str, log) -> Path:
     if args.runs is None:
         path = Path(args.model) if args.model else ROOT / "models" / "wtseg-r18s.pt"
@@ -126,9 +133,7 @@ def measure(photo: R.RealPhoto, model, args) -> dict:
     img, sem = R.read_pair(photo, args.max_side)
     inst = segment_image(img, model, refine=not args.no_refine)
     conf = inst[inst.scores >= 0.5] if len(inst) else inst
-    # The class map segment writes (classes/NAME.png): one class a pixel, as the truth has.
-    cmap = conf.class_map()
-    blade, tower, nac = cmap == 1, cmap >= 2, cmap == 3
+    blade, tower, nac = class_parts(conf)  # one class a pixel, as the truth has
     # The classes' unions beside it: a pixel in masks of two classes counts for both.
     u_blade, u_nac = conf.of("blade").union(), conf.of("nacelle").union()
     u_tower = conf.of("tower").union() | u_nac
