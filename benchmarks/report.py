@@ -132,6 +132,25 @@ SECTIONS: tuple[Section, ...] = (
          F("blade angle θ error on them, mean", ("pooled.theta_error_deg_mean", "pooled.blades_matched"),
            "{:.2f}° ({} blades)", "≤ 1°"))),
     Section(
+        "Segmentation: real photos, cross-validated, a refiner tuned on the photos (not shipped)",
+        "segment_real_refiner",
+        "python benchmarks/segment_real.py --runs runs/cv --train-refiner ARGS --out "
+        "benchmarks/results/segment_real_refiner.json",
+        "The same folds' networks as above, each fold's edges refined by the shipped refiner "
+        "fine-tuned on renders and the other folds' photos (`train-refiner --real`, "
+        "docs/train-refiner.md, \"Fine-tuning on labelled photos\"). Not shipped: it moves the "
+        "renders' edges as it "
+        "moves the photos', and the held-out renders lose what the photos gain (that page).",
+        (F("blade / tower IoU, pooled", ("pooled.blade_iou", "pooled.tower_iou", "pooled.photos"),
+           "{:.3f} / {:.3f} ({} photos)"),
+         F("blade / tower IoU on close-ups", ("per_view.close-up.blade_iou", "per_view.close-up.tower_iou",
+                                              "per_view.close-up.photos"),
+           "{:.3f} / {:.3f} ({} photos)"),
+         F("blade IoU on the distant photos", ("per_view.distant.blade_iou", "per_view.distant.photos"),
+           "{:.3f} ({} photos)"),
+         F("blade angle θ error on front views, mean",
+           ("pooled.theta_error_deg_mean", "pooled.blades_matched"), "{:.2f}° ({} blades)"))),
+    Section(
         "Segmentation: the wider views, on renders", "segment_views",
         "python benchmarks/segment_views.py --threads 2",
         "The shipped segmenter, as `segment` runs it, on the renderer's wider views (docs/synth.md): "

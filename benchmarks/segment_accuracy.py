@@ -445,7 +445,8 @@ def real_photos(model, root: Path, log, refiner=None) -> dict:
 
 
 def _trained_on_real(model) -> str | None:
-    """The real-photo folder a loaded model's weights trained on (their meta's ``real``)."""
+    """The real-photo folder a loaded model's (or refiner's) weights trained on (their meta's
+    ``real``)."""
     return (getattr(model, "meta", None) or {}).get("real") or None
 
 
@@ -497,15 +498,16 @@ def main(argv: list[str] | None = None) -> dict:
                                 load_model(weights, "cpu", "fp32") if model.precision != "fp32" else None,
                                 refiner)
     real = Path(a.real)
-    learned = _trained_on_real(model)
+    # a refiner fine-tuned on the photos (train-refiner --real) has learned them as much
+    learned = _trained_on_real(model) or (_trained_on_real(refiner) if refiner is not None else None)
     if a.dev:
         result["real"] = None
     elif learned:
         # Figures on photos the model learned would say nothing; segment_real.py measures the
         # recipe cross-validated by flight sequence instead.
         result["real"] = None
-        log(f"  {shown(weights)} trained on the real photos ({learned}): real-photo figures "
-            "skipped (benchmarks/segment_real.py cross-validates them)")
+        log(f"  {shown(weights)} or its refiner trained on the real photos ({learned}): "
+            "real-photo figures skipped (benchmarks/segment_real.py cross-validates them)")
     elif real.is_dir():
         result["real"] = real_photos(model, real, log, refiner)
     else:

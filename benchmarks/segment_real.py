@@ -1,6 +1,7 @@
 """The segmenter on labelled real photos, cross-validated by flight sequence, per view type.
 
-    python benchmarks/segment_real.py [--real DIR] [--model PATH | --runs DIR [--train ARGS]]
+    python benchmarks/segment_real.py [--real DIR] [--model PATH | --runs DIR [--train ARGS]
+                                      [--fold-refiners [--train-refiner ARGS]]] [--refiner PATH]
                                       [--only SEQ ...] [--limit N] [--out FILE]
 
 Photos: a folder with ``manifest.csv`` and semantic masks (default ``../shared/real-photos``
@@ -18,6 +19,13 @@ since consecutive frames are near-duplicates.
 * ``--runs DIR``: fold ``SEQ`` is measured with ``DIR/SEQ/model.pt``; with ``--train ARGS`` the
   folds missing one are trained first, ``wtinspect train ARGS --real DIR --real-holdout-sequence
   SEQ --out DIR/SEQ`` (a stopped fold resumed), so cross-validation is one command.
+* ``--fold-refiners`` (with ``--runs``): fold ``SEQ``'s edges refined by
+  ``DIR/SEQ/refiner/refiner.pt``, a refiner fine-tuned on the photos of the other folds; with
+  ``--train-refiner ARGS`` those missing are trained first, ``wtinspect train-refiner ARGS
+  --model DIR/SEQ/model.pt --real DIR --real-holdout-sequence SEQ --out DIR/SEQ/refiner``.
+  Otherwise every fold is refined by ``--refiner`` (default the shipped
+  ``models/wtseg-refine.pt``), which must not have learned the fold's photos either (the same
+  check on its meta).
 
 Each photo is segmented as ``segment`` does by default (second look for small turbines, mirror
 pass, edge refiner) and its class map (``classes/NAME.png``: one class a pixel, nacelle over
@@ -91,7 +99,30 @@ def model_for_fold(args, seq: str, log) -> Path:
     return path
 
 
+def refiner_for_fold(args, seq: str, log) -> Path:
+    if not args.fold_refiners:
+        path = Path(args.refiner) if args.refiner else ROOT / "models" / "wtseg-refine.pt"
+        check_not_trained_on(path, seq)
+        return path
+    run = Path(args.runs) / seq / "refiner"
+    path = run / "refiner.pt"
+    if not path.is_file():
+        if args.train_refiner is None:
+            raise SystemExit(f"{path}: no refiner for fold {seq} (train it: --train-refiner ARGS)")
+        cmd = [sys.executable, "-m", "wtcli", "train-refiner", *args.train_refiner.split(),
+               "--model", str(Path(args.runs) / seq / "model.pt"), "--real", str(args.real),
+               "--real-holdout-sequence", seq, "--out", str(run)]
+        if (run / "data").is_dir():
+            cmd.append("--resume")
+        log(f"fold {seq}: {' '.join(cmd[2:])}")
+        subprocess.run(cmd, check=True, cwd=ROOT)
+    check_not_trained_on(path, seq)
+    return path
+
+
 def check_not_trained_on(path: Path, seq: str) -> None:
+    """A segmenter's or a refiner's weights: refused for fold ``seq`` when their meta says they
+    learned real photos without holding ``seq`` out."""
     import torch
 
     meta = torch.load(path, map_location="cpu", weights_only=True).get("meta", {})
@@ -126,12 +157,12 @@ def angle_errors(truth, pred) -> list[tuple[float, float]]:
     return out
 
 
-def measure(photo: R.RealPhoto, model, args) -> dict:
+def measure(photo: R.RealPhoto, model, args, refiner: Path | None = None) -> dict:
     from wtcli.pitch import pitch_from_instances
     from wtcli.segment.infer import segment_image
 
     img, sem = R.read_pair(photo, args.max_side)
-    inst = segment_image(img, model, refine=not args.no_refine)
+    inst = segment_image(img, model, refine=not args.no_refine, refiner=refiner)
     conf = inst[inst.scores >= 0.5] if len(inst) else inst
     blade, tower, nac = class_parts(conf)  # one class a pixel, as the truth has
     # The classes' unions beside it: a pixel in masks of two classes counts for both.
@@ -187,6 +218,14 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--train", default=None, metavar="ARGS",
                     help="train missing folds: wtinspect train ARGS --real ... "
                          "--real-holdout-sequence SEQ --out RUNS/SEQ")
+    ap.add_argument("--refiner", default=None,
+                    help="edge refiner for every fold (default: the shipped models/wtseg-refine.pt)")
+    ap.add_argument("--fold-refiners", action="store_true",
+                    help="fold SEQ's edges refined by RUNS/SEQ/refiner/refiner.pt")
+    ap.add_argument("--train-refiner", default=None, metavar="ARGS",
+                    help="train missing fold refiners: wtinspect train-refiner ARGS --model "
+                         "RUNS/SEQ/model.pt --real ... --real-holdout-sequence SEQ --out "
+                         "RUNS/SEQ/refiner (implies --fold-refiners)")
     ap.add_argument("--only", nargs="*", default=None, metavar="SEQ", help="these folds only")
     ap.add_argument("--limit", type=int, default=None,
                     help="at most N photos per fold, spread over it (a quicker subset)")
@@ -202,13 +241,18 @@ def main(argv: list[str] | None = None) -> dict:
         ap.error("--train needs --runs (where the fold runs go)")
     if args.model and args.runs:
         ap.error("--model and --runs: one or the other")
-    if args.out is None and (args.model or args.only is not None or args.limit
+    args.fold_refiners = args.fold_refiners or args.train_refiner is not None
+    if args.fold_refiners and args.runs is None:
+        ap.error("--fold-refiners and --train-refiner need --runs (where the fold runs go)")
+    if args.fold_refiners and (args.refiner or args.no_refine):
+        ap.error("--fold-refiners: not with --refiner or --no-refine")
+    if args.out is None and (args.model or args.only is not None or args.limit or args.refiner
                              or args.max_side or args.no_refine):
         # The default results files hold the figures on every photo, as segment runs it: the
         # shipped model's, and with --runs the cross-validated fine-tune's; another model or a
         # subset must not overwrite them.
-        ap.error("--out FILE is needed with --model, --only, --limit, --max-side or --no-refine "
-                 "(the default results file holds the figures on every photo)")
+        ap.error("--out FILE is needed with --model, --refiner, --only, --limit, --max-side or "
+                 "--no-refine (the default results file holds the figures on every photo)")
     default_name = "segment_real_finetune" if args.runs else "segment_real"
     import torch
 
@@ -232,7 +276,7 @@ def main(argv: list[str] | None = None) -> dict:
     unknown = [n for n in names if n not in folds]
     if unknown:
         raise SystemExit(f"--only {unknown[0]}: not a sequence of {real} (it has: {', '.join(folds)})")
-    rows, models = [], {}
+    rows, models, refiners = [], {}, {}
     secs = 0.0  # measuring only: training a fold and loading its model are not counted
     for seq in names:
         fold = folds[seq]
@@ -241,17 +285,20 @@ def main(argv: list[str] | None = None) -> dict:
         path = model_for_fold(args, seq, log)
         models[seq] = str(path)
         model = load_model(path)
+        refiner = None if args.no_refine else refiner_for_fold(args, seq, log)
+        refiners[seq] = None if refiner is None else str(refiner)
         t1 = time.perf_counter()
         for p in fold:
-            rows.append(measure(p, model, args))
+            rows.append(measure(p, model, args, refiner))
         secs += time.perf_counter() - t1
         log(f"fold {seq}: {len(fold)} photos in {time.perf_counter() - t1:.0f} s; "
             f"blade IoU {summarise(rows[-len(fold):])['blade_iou']}")
     res = {
         "data": {"root": str(real), "photos_in_folder": len(photos),
                  "source": "WTA dataset, Zampokas et al., ICUAS 2022, doi:10.1109/ICUAS54217.2022.9836096"},
-        "models": models,
-        "settings": {"refine": not args.no_refine, "max_side": args.max_side, "limit": args.limit,
+        "models": models, "refiners": refiners,
+        "settings": {"refine": not args.no_refine, "fold_refiners": args.fold_refiners,
+                     "max_side": args.max_side, "limit": args.limit,
                      "folds": names},
         "pooled": summarise(rows),
         "per_view": {v: summarise([r for r in rows if r["view"] == v])

@@ -129,7 +129,8 @@ def test_the_readmes_figures_are_the_benchmark_pages():
 def test_a_subset_or_another_model_never_overwrites_the_real_photo_figures(capsys):
     seg_real = _load("segment_real")
     before = (ROOT / "benchmarks" / "results" / "segment_real.json").read_bytes()
-    for argv in (["--limit", "2"], ["--only", "other"], ["--model", "some.pt"], ["--no-refine"]):
+    for argv in (["--limit", "2"], ["--only", "other"], ["--model", "some.pt"], ["--no-refine"],
+                 ["--refiner", "some.pt"]):
         with pytest.raises(SystemExit) as e:
             seg_real.main(argv)
         assert e.value.code == 2, argv
@@ -147,3 +148,21 @@ def test_segment_accuracy_knows_a_model_that_learned_the_real_photos(tmp_path):
     save_weights(net, tmp_path / "s.pt", {"data": "synthetic"})
     assert seg_acc._trained_on_real(load_model(tmp_path / "r.pt", "cpu", "fp32")) == "../shared/real-photos"
     assert seg_acc._trained_on_real(load_model(tmp_path / "s.pt", "cpu", "fp32")) is None
+
+
+def test_segment_real_refuses_a_refiner_that_learned_the_fold(tmp_path, capsys):
+    """A refiner fine-tuned on photos (train-refiner --real) is held to what a segmenter is: it
+    may refine only the folds it held out, and the fold refiners need fold runs."""
+    from wtcli.segment.refine import Refiner, save_refiner
+
+    seg_real = _load("segment_real")
+    save_refiner(Refiner((8, 4)), tmp_path / "ref.pt",
+                 {"real": "../shared/real-photos", "real_holdout": ["envB_34-41"]})
+    seg_real.check_not_trained_on(tmp_path / "ref.pt", "envB_34-41")
+    with pytest.raises(SystemExit, match="without holding out sequence other"):
+        seg_real.check_not_trained_on(tmp_path / "ref.pt", "other")
+    for argv in (["--fold-refiners", "--out", "x.json"],
+                 ["--runs", "r", "--fold-refiners", "--no-refine", "--out", "x.json"]):
+        with pytest.raises(SystemExit) as e:
+            seg_real.main(argv)
+        assert e.value.code == 2 and "--fold-refiners" in capsys.readouterr().err

@@ -1,7 +1,7 @@
 """The edge refiner: band and features, what it does to masks (the shipped weights fix a mask a
 pixel too wide or too thin on a clean edge, keep far pixels, work on large photos), its file's
 errors, and `train-refiner` (a tiny run, resume, a run folder not reused by mistake, a pixel
-budget)."""
+budget; labelled photos with a sequence held out, fine-tuned from a refiner's weights)."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ import torch
 from wtcli.errors import ConfigError, ExitCode, InputError, ModelError
 from wtcli.masks import Instances
 from wtcli.segment import refine as R
-from wtcli.segment.train_refine import RefinerConfig, _load_parts, fit, train_refiner
+from wtcli.segment.train_refine import RefinerConfig, _load_parts, _pass_rows, fit, train_refiner
 
 
 def _iou(a, b):
@@ -241,6 +241,77 @@ def test_resume_refuses_another_pixel_budget(tmp_path):
         fit(tiny, X[:100], Y[:100])
 
 
+def _two_flights(root):
+    """The test photo folder of test_train, its six photos in two flights: f1 (4), f2 (2)."""
+    import csv
+
+    from test_train import _photo_folder
+
+    _photo_folder(root, n=6)
+    rows = list(csv.reader((root / "manifest.csv").open()))
+    rows[0].append("sequence")
+    for k, r in enumerate(rows[1:]):
+        r.append("f1" if k < 4 else "f2")
+    with (root / "manifest.csv").open("w", newline="") as f:
+        csv.writer(f).writerows(rows)
+    return root
+
+
+def test_train_refiner_on_labelled_photos_holds_a_sequence_out(tmp_path):
+    photos = _two_flights(tmp_path / "photos")
+    shipped = R.resolve_refiner()
+    cfg = RefinerConfig(out=str(tmp_path / "run"), images=2, epochs=1, eval_count=0, threads=1,
+                        init=str(shipped), real=str(photos), real_holdout=("f2",), real_share=0.5)
+    seen = []
+    s = train_refiner(cfg, progress=seen.append)
+    assert [r["done"] for r in seen if r["stage"] == "photos"] == [1, 2, 3, 4]  # f2 left out
+    listing = json.loads((tmp_path / "run" / "data" / "photos.json").read_text())
+    assert listing["photos"] == ["s_01", "s_02", "s_03", "s_04"] and listing["real_holdout"] == ["f2"]
+    assert 0 < s["photo_pixels"] < s["pixels"]
+    meta = R.load_refiner(tmp_path / "run" / "refiner.pt").meta
+    # as a segmenter's weights say it: segment_real.py refuses the folds a file learned
+    assert meta["real"] == str(photos) and meta["real_holdout"] == ["f2"]
+    assert meta["init"] == str(shipped) and meta["photo_pixels"] == s["photo_pixels"]
+    # the pixels on disk are f1's: resuming with another selection is refused, not mixed
+    cfg.resume, cfg.real_holdout = True, ()
+    with pytest.raises(ConfigError, match="photos.json: the photo pixels on disk came from other photos"):
+        train_refiner(cfg)
+    with pytest.raises(ConfigError, match="every photo is held out"):
+        train_refiner(RefinerConfig(out=str(tmp_path / "r2"), images=2, real=str(photos),
+                                    real_holdout=("f1", "f2")))
+    with pytest.raises(ConfigError, match="--real-holdout-sequence f9: not a sequence"):
+        train_refiner(RefinerConfig(out=str(tmp_path / "r3"), images=2, real=str(photos),
+                                    real_holdout=("f9",)))
+
+
+def test_init_starts_from_the_weights_given_and_checks_the_widths(tmp_path):
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(25_000, R.N_FEATURES)).astype(np.float16)
+    Y = X[:, R.MASK_CENTRE] > 0
+    small = R.Refiner((8, 4))
+    R.save_refiner(small, tmp_path / "small.pt")
+    cfg = RefinerConfig(out=str(tmp_path / "a"), epochs=1, hidden=(8, 4), threads=1, lr=1e-12,
+                        init=str(tmp_path / "small.pt"))
+    net, _ = fit(cfg, X, Y)  # a step too small to move it: the weights are the file's
+    assert all(torch.allclose(a, b, atol=1e-6) for a, b in zip(net.state_dict().values(),
+                                                              small.state_dict().values()))
+    cfg = RefinerConfig(out=str(tmp_path / "b"), epochs=1, hidden=(16, 4), init=str(tmp_path / "small.pt"))
+    with pytest.raises(ConfigError, match="a refiner of --hidden 8,4; train with those, not 16,4"):
+        fit(cfg, X, Y)
+
+
+def test_a_pass_holds_every_render_row_once_and_the_photos_share():
+    train = np.arange(1000)
+    rows = _pass_rows(train, 800, 0.25, seed=3, epoch=0)
+    renders, photos = rows[rows < 800], rows[rows >= 800]
+    assert sorted(renders.tolist()) == list(range(800))
+    assert len(photos) == round(0.25 / 0.75 * 800) and abs(len(photos) / len(rows) - 0.25) < 0.01
+    assert (rows == _pass_rows(train, 800, 0.25, seed=3, epoch=0)).all()  # repeatable (resume)
+    assert not (rows == _pass_rows(train, 800, 0.25, seed=3, epoch=1)).all()  # a new draw a pass
+    alone = _pass_rows(train, 1000, 0.25, seed=3, epoch=0)  # no photos: each row once
+    assert sorted(alone.tolist()) == list(range(1000))
+
+
 def test_train_refiner_cli_errors(cli, tmp_path):
     res = cli("train-refiner", "--images", "0", "--out", str(tmp_path / "r"))
     assert res.exit_code == ExitCode.CONFIG and "--images 0" in res.stderr
@@ -251,6 +322,12 @@ def test_train_refiner_cli_errors(cli, tmp_path):
     for bad in ("512", "512,x", "512,0"):
         res = cli("train-refiner", "--hidden", bad, "--out", str(tmp_path / "r"))
         assert res.exit_code == ExitCode.CONFIG and f"--hidden {bad}" in res.stderr, res.stderr
+    for args, code, said in ((("--real-share", "1"), ExitCode.CONFIG, "--real-share 1"),
+                             (("--real-holdout-sequence", "f1"), ExitCode.CONFIG, "needs --real"),
+                             (("--real", str(tmp_path / "none")), ExitCode.INPUT, "none: no such photo folder"),
+                             (("--init", str(tmp_path / "none.pt")), ExitCode.INPUT, "no such refiner weights")):
+        res = cli("train-refiner", *args, "--out", str(tmp_path / "r"))
+        assert res.exit_code == code and said in res.stderr, res.stderr
     assert not (tmp_path / "r").exists()  # refused before anything was made
 
 

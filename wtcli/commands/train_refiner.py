@@ -30,16 +30,32 @@ def train_refiner(
                                help="Widths of the MLP's two hidden layers (stored in the file)."),
     eval_count: int = typer.Option(16, "--eval-count",
                                    help="Held-out renders evaluated at the end (0: none)."),
+    init: Optional[Path] = typer.Option(None, "--init",
+                                        help="Refiner weights to start from (e.g. "
+                                             "models/wtseg-refine.pt): fine-tune instead of "
+                                             "training anew."),
+    real: Optional[Path] = typer.Option(None, "--real",
+                                        help="Labelled photos too, as `train --real` takes them "
+                                             "(a folder with manifest.csv and semantic masks, or "
+                                             "a COCO file): their blade and tower edges."),
+    real_share: float = typer.Option(0.25, "--real-share",
+                                     help="The photos' share of the fitted pixels (0-1; renders "
+                                          "make the rest)."),
+    real_holdout: Optional[list[str]] = typer.Option(None, "--real-holdout-sequence",
+                                                     metavar="SEQ",
+                                                     help="Leave this flight sequence of --real "
+                                                          "out (repeatable), to measure on it."),
     threads: Optional[int] = typer.Option(None, "--threads", min=1, help="CPU threads for torch."),
     resume: bool = typer.Option(False, "--resume",
                                 help="Continue OUT: keep its data parts and last finished pass."),
     json_out: bool = typer.Option(False, "--json", help="Print the run summary JSON on stdout."),
 ) -> None:
-    """Train the edge refiner on renders segmented by the segmenter; resumable."""
+    """Train the edge refiner on renders (and labelled photos) segmented by the segmenter;
+    resumable."""
     from rich.table import Table
 
     from wtcli.console import count_bar, err_console
-    from wtcli.errors import ConfigError
+    from wtcli.errors import ConfigError, InputError
     from wtcli.jsonio import document, dumps
     from wtcli.segment.train_refine import REFINER_SCHEMA, RefinerConfig
     from wtcli.segment.train_refine import train_refiner as run
@@ -49,10 +65,17 @@ def train_refiner(
     except ValueError:
         raise ConfigError(f"--hidden {hidden}: two layer widths, e.g. 512,256") from None
     from wtcli.outputs import writable_folder
-    writable_folder(out)  # before the training, not after
+    if real is not None and not real.exists():
+        raise InputError(f"{real}: no such photo folder or COCO file (--real)")
+    if init is not None and not init.is_file():
+        raise InputError(f"{init}: no such refiner weights file (--init)")
     cfg = RefinerConfig(out=str(out), images=images, model=str(model) if model else None, seed=seed,
                         epochs=epochs, max_pixels=max_pixels, lr=lr, eval_count=eval_count,
-                        threads=threads, resume=resume, hidden=widths)
+                        threads=threads, resume=resume, hidden=widths,
+                        init=str(init) if init else None, real=str(real) if real else None,
+                        real_share=real_share, real_holdout=tuple(real_holdout or ()))
+    cfg.check()  # a wrong option is said before the folder is made
+    writable_folder(out)  # before the training, not after
     with ExitStack() as stack:
         bars: dict[str, object] = {}
 
@@ -60,7 +83,7 @@ def train_refiner(
             stage = rec["stage"]
             if stage not in bars:
                 stack.close()  # the previous stage's bar ends where the next begins
-                name = "render + segment" if stage == "data" else "fit"
+                name = {"data": "render + segment", "photos": "photos: segment"}.get(stage, "fit")
                 bars[stage] = stack.enter_context(count_bar(f"train-refiner {name}", rec["total"]))
             note = "on disk" if rec.get("skipped") else (
                 f"pass {rec['epoch']}/{rec['epochs']} loss {rec['loss']:.3f}" if stage == "fit" else "")
@@ -78,7 +101,8 @@ def train_refiner(
             table.add_row(label, "-" if a is None else f"{a:.3f}", "-" if b is None else f"{b:.3f}")
         err_console.print(table)
     kept = (f" (of {summary['pixels_made']})" if summary["pixels_made"] > summary["pixels"] else "")
-    err_console.print(f"{summary['pixels']} band pixels{kept} from {images} renders "
+    photos = f" and labelled photos ({summary['photo_pixels']})" if summary["photo_pixels"] else ""
+    err_console.print(f"{summary['pixels']} band pixels{kept} from {images} renders{photos} "
                       f"({summary['data_seconds']:.0f} s), fitted in {summary['fit_seconds']:.0f} s: "
                       f"pixel accuracy {summary['val_accuracy_unrefined']:.3f} -> "
                       f"{summary['val_accuracy']:.3f}; weights -> {summary['weights']}", soft_wrap=True)

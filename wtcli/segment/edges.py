@@ -165,12 +165,8 @@ def refine_edges(probability: Callable[[np.ndarray], np.ndarray], image_bgr: np.
     image_bgr = as_bgr(image_bgr)  # grey and BGRA photos too, as the network takes them
     H, W = inst.masks.shape[1:]
     if max_size and max(H, W) > max_size:
-        f = max_size / max(H, W)
-        w, h = max(1, round(W * f)), max(1, round(H * f))
-        small = Instances(inst.labels, np.stack([_resize_mask(m, w, h) for m in inst.masks]),
-                          inst.scores, inst.boxes * f)
-        done = refine_edges(probability, cv2.resize(image_bgr, (w, h), interpolation=cv2.INTER_AREA), small,
-                            add_at, keep_at, None)
+        small_img, small = at_refine_size(image_bgr, inst, max_size)
+        done = refine_edges(probability, small_img, small, add_at, keep_at, None)
         # only what the refiner changed is scaled back: the rest keeps the photo's own masks
         masks = np.stack([(m | _resize_mask(d & ~s, W, H)) & ~_resize_mask(s & ~d, W, H)
                           for m, s, d in zip(inst.masks, small.masks, done.masks)])
@@ -192,6 +188,22 @@ def refine_edges(probability: Callable[[np.ndarray], np.ndarray], image_bgr: np.
         if new.any():
             masks[i, y0:y0 + m.shape[0], x0:x0 + m.shape[1]] = new
     return Instances(inst.labels, masks, inst.scores, inst.boxes)
+
+
+def at_refine_size(image_bgr: np.ndarray, inst: Instances, max_size: int | None = REFINE_MAX_SIZE
+                   ) -> tuple[np.ndarray, Instances]:
+    """The photo and the instances as ``refine_edges`` looks at them: scaled down to ``max_size``
+    px on the longer side where larger (area-averaged photo, masks by coverage), else as they are.
+    ``train-refiner`` cuts its photos' training pixels at the same size."""
+    H, W = image_bgr.shape[:2]
+    if not max_size or max(H, W) <= max_size:
+        return image_bgr, inst
+    f = max_size / max(H, W)
+    w, h = max(1, round(W * f)), max(1, round(H * f))
+    masks = (np.stack([_resize_mask(m, w, h) for m in inst.masks]) if len(inst)
+             else np.zeros((0, h, w), bool))
+    return (cv2.resize(image_bgr, (w, h), interpolation=cv2.INTER_AREA),
+            Instances(inst.labels, masks, inst.scores, inst.boxes * f))
 
 
 def _resize_mask(mask: np.ndarray, w: int, h: int) -> np.ndarray:
