@@ -86,15 +86,9 @@ def model_for_fold(args, seq: str, log) -> Path:
         return path
     run = Path(args.runs) / seq
     path = run / "model.pt"
-    if not path.is_file():
-        if args.train is None:
-            raise SystemExit(f"{path}: no model for fold {seq} (train it: --train ARGS)")
-        cmd = [sys.executable, "-m", "wtcli", "train", *args.train.split(), "--real", str(args.real),
-               "--real-holdout-sequence", seq, "--out", str(run)]
-        if (run / "last.ckpt").is_file():
-            cmd.append("--resume")
-        log(f"fold {seq}: {' '.join(cmd[2:])}")
-        subprocess.run(cmd, check=True, cwd=ROOT)
+    _train_fold(path, seq, "model", args.train, "--train",
+                ["train", *(args.train or "").split(), "--real", str(args.real),
+                 "--real-holdout-sequence", seq, "--out", str(run)], run / "last.ckpt", log)
     check_not_trained_on(path, seq)
     return path
 
@@ -106,18 +100,25 @@ def refiner_for_fold(args, seq: str, log) -> Path:
         return path
     run = Path(args.runs) / seq / "refiner"
     path = run / "refiner.pt"
-    if not path.is_file():
-        if args.train_refiner is None:
-            raise SystemExit(f"{path}: no refiner for fold {seq} (train it: --train-refiner ARGS)")
-        cmd = [sys.executable, "-m", "wtcli", "train-refiner", *args.train_refiner.split(),
-               "--model", str(Path(args.runs) / seq / "model.pt"), "--real", str(args.real),
-               "--real-holdout-sequence", seq, "--out", str(run)]
-        if (run / "data").is_dir():
-            cmd.append("--resume")
-        log(f"fold {seq}: {' '.join(cmd[2:])}")
-        subprocess.run(cmd, check=True, cwd=ROOT)
+    _train_fold(path, seq, "refiner", args.train_refiner, "--train-refiner",
+                ["train-refiner", *(args.train_refiner or "").split(),
+                 "--model", str(Path(args.runs) / seq / "model.pt"), "--real", str(args.real),
+                 "--real-holdout-sequence", seq, "--out", str(run)], run / "data", log)
     check_not_trained_on(path, seq)
     return path
+
+
+def _train_fold(path: Path, seq: str, what: str, given: str | None, option: str,
+                command: list[str], started: Path, log) -> None:
+    """Where fold ``seq`` has no ``path``, run ``wtinspect COMMAND`` (``option`` ARGS given),
+    resumed where a stopped run left ``started``."""
+    if path.is_file():
+        return
+    if given is None:
+        raise SystemExit(f"{path}: no {what} for fold {seq} (train it: {option} ARGS)")
+    cmd = [sys.executable, "-m", "wtcli", *command] + (["--resume"] if started.exists() else [])
+    log(f"fold {seq}: {' '.join(cmd[2:])}")
+    subprocess.run(cmd, check=True, cwd=ROOT)
 
 
 def check_not_trained_on(path: Path, seq: str) -> None:
