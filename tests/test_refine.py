@@ -284,6 +284,20 @@ def test_train_refiner_on_labelled_photos_holds_a_sequence_out(tmp_path):
                                     real_holdout=("f9",)))
 
 
+def test_train_refiner_takes_labelled_photos_as_a_coco_file(tmp_path):
+    """A COCO file of one's own photos (here `synth` output): blade edges against its blades,
+    tower edges against its towers and nacelles as one, the photos named by their files."""
+    from wtcli.synth.render import render_dataset
+
+    render_dataset(tmp_path / "coco", count=2, seed=5, width=480, height=360, view="front",
+                   progress=False)
+    cfg = RefinerConfig(out=str(tmp_path / "run"), images=2, epochs=1, eval_count=0, threads=1,
+                        hidden=(8, 4), real=str(tmp_path / "coco" / "instances.json"))
+    s = train_refiner(cfg)
+    listing = json.loads((tmp_path / "run" / "data" / "photos.json").read_text())
+    assert listing["photos"] == ["00000", "00001"] and s["photo_pixels"] > 0
+
+
 def test_init_starts_from_the_weights_given_and_checks_the_widths(tmp_path):
     rng = np.random.default_rng(0)
     X = rng.normal(size=(25_000, R.N_FEATURES)).astype(np.float16)

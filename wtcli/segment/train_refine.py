@@ -295,12 +295,17 @@ def _pass_rows(train: np.ndarray, photo_from: int, share: float, seed: int, epoc
     ``photo_from`` on are the photos', as many photo rows drawn (with repeats: a few photos
     hold far fewer pixels than the renders) as make ``share`` of the pass."""
     rng = np.random.default_rng([seed, epoch])
-    if photo_from >= len(train) or not (train >= photo_from).any():
-        return train[rng.permutation(len(train))]
     renders, photos = train[train < photo_from], train[train >= photo_from]
-    drawn = rng.choice(photos, round(share / (1 - share) * len(renders)), replace=True)
+    if not len(photos):
+        return train[rng.permutation(len(train))]
+    drawn = rng.choice(photos, _photo_draws(len(renders), share), replace=True)
     rows = np.concatenate([renders, drawn])
     return rows[rng.permutation(len(rows))]
+
+
+def _photo_draws(renders: int, share: float) -> int:
+    """Photo rows a pass draws beside ``renders`` render rows, to make ``share`` of it."""
+    return round(share / (1 - share) * renders)
 
 
 def _part_rows(parts: list[Path]) -> int:
@@ -336,7 +341,9 @@ def fit(cfg: RefinerConfig, X: np.ndarray, Y: np.ndarray,
         net.load_state_dict(start.state_dict())
     photo_from = len(X) - photo_rows
     opt = torch.optim.AdamW(net.parameters(), cfg.lr, weight_decay=1e-4)
-    steps_per = max(1, len(_pass_rows(train, photo_from, cfg.real_share, cfg.seed, 0)) // cfg.batch_size)
+    n_renders = int((train < photo_from).sum())
+    extra = _photo_draws(n_renders, cfg.real_share) if n_renders < len(train) else 0
+    steps_per = max(1, (n_renders + extra) // cfg.batch_size)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, cfg.lr, total_steps=cfg.epochs * steps_per,
                                                 pct_start=0.05)
     loss_fn = torch.nn.BCEWithLogitsLoss()
