@@ -166,3 +166,20 @@ def test_segment_real_refuses_a_refiner_that_learned_the_fold(tmp_path, capsys):
         with pytest.raises(SystemExit) as e:
             seg_real.main(argv)
         assert e.value.code == 2 and "--fold-refiners" in capsys.readouterr().err
+
+
+def test_segment_real_grows_each_part_by_one_pixel_in_the_class_maps_order():
+    """The diagnostic beside the real-photo IoU: every part's region one pixel wider (3 x 3), a
+    part painted over the one before it in the class map's order, as segment paints them."""
+    import numpy as np
+
+    seg_real = _load("segment_real")
+    cmap = np.zeros((9, 9), np.uint8)
+    cmap[1:8, 2] = 1      # a blade one pixel wide
+    cmap[1:8, 5] = 2      # a tower two pixels to its right
+    cmap[4, 7] = 3        # a nacelle pixel beside the tower
+    g = seg_real.grown(cmap)
+    assert list(g[4]) == [0, 1, 1, 1, 2, 2, 3, 3, 3]   # the nacelle over the grown tower
+    assert g[0, 1] == 1 and g[8, 3] == 1 and g[0, 0] == 0   # corners grow too, no further
+    assert not seg_real.grown(np.zeros_like(cmap)).any()   # nothing grows from nothing
+    assert ((g == 1).sum(), (cmap == 1).sum()) == (27, 7)
