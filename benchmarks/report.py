@@ -127,6 +127,10 @@ SECTIONS: tuple[Section, ...] = (
            ("pooled.blade_iou_union", "pooled.tower_iou_union"), "{:.3f} / {:.3f}"),
          F("the same, every part a pixel wider (diagnostic)",
            ("pooled.blade_iou_grown", "pooled.tower_iou_grown"), "{:.3f} / {:.3f}"),
+         F("blade pixels the photos' masks hold beyond ours (within 2 px): median share of the "
+           "blade's contrast they carry",
+           ("outline_tint.missed.p50", "outline_tint.beyond.p50", "outline_tint.edge.p50"),
+           "{:.2f} (the background just outside the photos' masks {:.2f}, our masks' edge {:.2f})"),
          F("blade / tower IoU on close-ups", ("per_view.close-up.blade_iou", "per_view.close-up.tower_iou",
                                               "per_view.close-up.photos"),
            "{:.3f} / {:.3f} ({} photos)", "≥ 0.80"),

@@ -36,7 +36,10 @@ apart (a heuristic truth); ``*_iou_union`` beside them score the classes' instan
 instead (a pixel in masks of two classes counts for both), and ``*_iou_grown`` the class map with
 every part's region grown by one pixel (``grown``: the photos' hand-drawn outline runs about a
 pixel wider than the renders' labels, which the masks follow; a diagnostic of how much of the
-gap is that convention, not what ``segment`` writes). IoU is per photo where the
+gap is that convention, not what ``segment`` writes), and ``outline_tint`` how much of the blade's
+contrast the pixels at that edge carry (``outline_tint``: the photos' pixels beyond ours, the
+background just outside the photos' masks, our masks' own edge; quartiles over every photo's
+pixels). IoU is per photo where the
 prediction or the truth has the class, then averaged: per view type
 (``wtcli.segment.real.VIEW_TYPES``), per fold and pooled. Front and front-oblique
 views whose truth splits into exactly three blades at one hub: the share where pitch reads
@@ -92,6 +95,48 @@ def grown(cmap: np.ndarray) -> np.ndarray:
     for c in (1, 2, 3):  # blade, tower, nacelle: wtcli.masks.CLASS_MAP_ORDER
         region = cv2.dilate((cmap == c).astype(np.uint8), kernel).astype(bool)
         out[region & (out < c)] = c
+    return out
+
+
+def _disk(r: int) -> np.ndarray:
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+
+
+def outline_tint(image_bgr: np.ndarray, truth: np.ndarray, pred: np.ndarray) -> dict[str, np.ndarray]:
+    """How much of a blade's contrast with its background the pixels at its edge carry: 0 looks
+    like the background just outside, 1 like the blade inside. Per pixel, (grey - local
+    background) / (local blade - local background), the local means over the pixels both masks
+    hold (eroded by one) within 5 px and the pixels neither holds, 3 px clear of both, within
+    7 px; pixels whose blade and background differ by less than 15 grey levels are left out.
+    Returns the shares of ``missed`` (the truth's pixels within 2 px of ``pred`` that it leaves
+    out), ``edge`` (``pred``'s own boundary pixels inside the truth) and ``beyond`` (the
+    pixels just outside the truth and ``pred``: the background, for scale)."""
+    grey = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    both = cv2.erode((truth & pred).astype(np.uint8), _disk(1)).astype(np.float32)
+    clear = ~cv2.dilate((truth | pred).astype(np.uint8), _disk(3)).astype(bool)
+
+    def local_mean(weight: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
+        k = (2 * r + 1, 2 * r + 1)
+        n = cv2.boxFilter(weight, -1, k, normalize=False)
+        return cv2.boxFilter(grey * weight, -1, k, normalize=False) / np.maximum(n, 1e-6), n
+
+    inside, n_in = local_mean(both, 5)
+    outside, n_out = local_mean(clear.astype(np.float32), 7)
+    ok = (n_in > 3) & (n_out > 10) & (np.abs(inside - outside) > 15)
+    share = (grey - outside) / np.where(ok, inside - outside, 1.0)
+    near = cv2.dilate(pred.astype(np.uint8), _disk(2)).astype(bool)
+    rim = pred & ~cv2.erode(pred.astype(np.uint8), _disk(1)).astype(bool)
+    ring = ~truth & ~pred & cv2.dilate(truth.astype(np.uint8), _disk(1)).astype(bool)
+    return {"missed": share[truth & ~pred & near & ok], "edge": share[rim & truth & ok],
+            "beyond": share[ring & ok]}
+
+
+def tint_summary(parts: list[dict[str, np.ndarray]]) -> dict:
+    out = {}
+    for key in ("missed", "edge", "beyond"):
+        v = np.concatenate([p[key] for p in parts]) if parts else np.zeros(0)
+        out[key] = ({"pixels": int(v.size), **{f"p{q}": round(float(np.percentile(v, q)), 3)
+                                               for q in (25, 50, 75)}} if v.size else None)
     return out
 
 
@@ -191,6 +236,7 @@ def measure(photo: R.RealPhoto, model, args, refiner: Path | None = None) -> dic
            "blade_iou_union": iou(u_blade, sem == R.BLADE),
            "tower_iou_union": iou(u_tower, sem == R.TOWER),
            "blade_iou_grown": iou(g == 1, sem == R.BLADE), "tower_iou_grown": iou(g >= 2, sem == R.TOWER)}
+    rec["_tint"] = outline_tint(img, sem == R.BLADE, blade)
     split = R.split_semantic(sem)
     true_nac = split.instances.of("nacelle")
     if len(true_nac):
@@ -315,6 +361,7 @@ def main(argv: list[str] | None = None) -> dict:
         secs += time.perf_counter() - t1
         log(f"fold {seq}: {len(fold)} photos in {time.perf_counter() - t1:.0f} s; "
             f"blade IoU {summarise(rows[-len(fold):])['blade_iou']}")
+    tints = [r.pop("_tint") for r in rows]
     res = {
         "data": {"root": str(real), "photos_in_folder": len(photos),
                  "source": "WTA dataset, Zampokas et al., ICUAS 2022, doi:10.1109/ICUAS54217.2022.9836096"},
@@ -326,6 +373,7 @@ def main(argv: list[str] | None = None) -> dict:
         "per_view": {v: summarise([r for r in rows if r["view"] == v])
                      for v in R.VIEW_TYPES if any(r["view"] == v for r in rows)},
         "per_fold": {s: summarise([r for r in rows if r["sequence"] == s]) for s in names},
+        "outline_tint": tint_summary(tints),
         "seconds": round(secs, 1), "seconds_per_photo": round(secs / max(1, len(rows)), 2),
         "per_photo": rows,
     }
@@ -340,6 +388,11 @@ def main(argv: list[str] | None = None) -> dict:
     if "blade_iou_grown" in p:
         print(f"every part a pixel wider (a diagnostic of the photos' outline): blade / tower "
               f"{p['blade_iou_grown']} / {p.get('tower_iou_grown')}")
+    t = res["outline_tint"]
+    if t["missed"] and t["beyond"] and t["edge"]:
+        print(f"share of a blade's contrast, median: pixels the photos' masks hold beyond ours "
+              f"{t['missed']['p50']} ({t['missed']['pixels']}), the background just outside theirs "
+              f"{t['beyond']['p50']}, our masks' own edge {t['edge']['p50']}")
     if "front_exactly_3" in p:
         print(f"front views with 3 true blades: {p['front_views_3_true_blades']}, exactly 3 read "
               f"{100 * p['front_exactly_3']:.0f} %, mean |theta error| {p['theta_error_deg_mean']} deg, "

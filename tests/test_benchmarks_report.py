@@ -183,3 +183,26 @@ def test_segment_real_grows_each_part_by_one_pixel_in_the_class_maps_order():
     assert g[0, 1] == 1 and g[8, 3] == 1 and g[0, 0] == 0   # corners grow too, no further
     assert not seg_real.grown(np.zeros_like(cmap)).any()   # nothing grows from nothing
     assert ((g == 1).sum(), (cmap == 1).sum()) == (27, 7)
+
+
+def test_outline_tint_tells_a_drawn_margin_from_a_soft_edge():
+    """A truth drawn a pixel outside a sharp blade: the pixels it adds look like the background
+    (share 0); the same margin over a blurred edge carries half the blade's contrast."""
+    import numpy as np
+
+    seg_real = _load("segment_real")
+    img = np.full((40, 40, 3), 50, np.uint8)
+    img[5:35, 10:20] = 200
+    pred = np.zeros((40, 40), bool)
+    pred[5:35, 10:20] = True
+    truth = np.zeros_like(pred)
+    truth[5:35, 9:21] = True
+    t = seg_real.outline_tint(img, truth, pred)
+    assert t["missed"].size and np.allclose(t["missed"], 0.0)
+    assert np.allclose(np.median(t["edge"]), 1.0) and np.allclose(np.median(t["beyond"]), 0.0)
+    img[5:35, [9, 20]] = 125
+    soft = seg_real.outline_tint(img, truth, pred)
+    assert np.allclose(soft["missed"], 0.5)
+    s = seg_real.tint_summary([t, soft])
+    assert s["missed"]["pixels"] == t["missed"].size + soft["missed"].size
+    assert s["missed"]["p25"] == 0.0 and s["missed"]["p75"] == 0.5
