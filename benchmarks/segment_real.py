@@ -33,14 +33,13 @@ tower over blade where masks overlap, ``Instances.class_map``) scored against it
 blade IoU (class 1 against class 1), tower IoU (tower and nacelle against class 2, which holds
 the nacelle and the hub), and nacelle IoU on the photos where ``split_semantic`` tells a nacelle
 apart (a heuristic truth); ``*_iou_union`` beside them score the classes' instance unions
-instead (a pixel in masks of two classes counts for both), and ``*_iou_grown`` the class map with
-every part's region grown by one pixel (``grown``: the photos' hand-drawn outline runs about a
-pixel wider than the renders' labels, which the masks follow; a diagnostic of how much of the
-gap is that convention, not what ``segment`` writes), and ``outline_tint`` how much of the blade's
-contrast the pixels at that edge carry (``outline_tint``: the photos' pixels beyond ours, the
-background just outside the photos' masks, our masks' own edge; quartiles over every photo's
-pixels). IoU is per photo where the
-prediction or the truth has the class, then averaged: per view type
+instead (a pixel in masks of two classes counts for both). Two diagnostics of the photos'
+hand-drawn outline, which runs about a pixel outside the edge the renders' labels and so the
+masks follow (not what ``segment`` writes): ``*_iou_grown`` scores the class map with every
+part's region grown by one pixel (``grown``), and ``outline_tint`` gives the quartiles, over
+every photo's pixels, of the share of the blade's contrast carried by the photos' blade pixels
+beyond ours, by the background just outside theirs and by our masks' own edge. IoU is per photo
+where the prediction or the truth has the class, then averaged: per view type
 (``wtcli.segment.real.VIEW_TYPES``), per fold and pooled. Front and front-oblique
 views whose truth splits into exactly three blades at one hub: the share where pitch reads
 exactly three blades, and the blade-angle error against pitch run on the split truth (each true
@@ -70,6 +69,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from wtcli.errors import WtError  # noqa: E402
 from wtcli.segment import real as R  # noqa: E402
+from wtcli.segment.edges import _disk  # noqa: E402  (the refiner's disk, as refine.py takes it)
 
 FRONT_VIEWS = ("front", "front-oblique")
 
@@ -82,7 +82,11 @@ def iou(a: np.ndarray, b: np.ndarray) -> float | None:
 def class_parts(conf) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(blade, tower with nacelle, nacelle) as the class map ``segment`` writes shows them (one
     class a pixel, ``Instances.class_map``), to score against a semantic mask."""
-    cmap = conf.class_map()
+    return map_parts(conf.class_map())
+
+
+def map_parts(cmap: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(blade, tower with nacelle, nacelle) of a class map: the photos' class 2 holds both."""
     return cmap == 1, cmap >= 2, cmap == 3
 
 
@@ -96,10 +100,6 @@ def grown(cmap: np.ndarray) -> np.ndarray:
         region = cv2.dilate((cmap == c).astype(np.uint8), kernel).astype(bool)
         out[region & (out < c)] = c
     return out
-
-
-def _disk(r: int) -> np.ndarray:
-    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
 
 
 def outline_tint(image_bgr: np.ndarray, truth: np.ndarray, pred: np.ndarray) -> dict[str, np.ndarray]:
@@ -226,8 +226,9 @@ def measure(photo: R.RealPhoto, model, args, refiner: Path | None = None) -> dic
     img, sem = R.read_pair(photo, args.max_side)
     inst = segment_image(img, model, refine=not args.no_refine, refiner=refiner)
     conf = inst[inst.scores >= 0.5] if len(inst) else inst
-    blade, tower, nac = class_parts(conf)  # one class a pixel, as the truth has
-    g = grown(conf.class_map())
+    cmap = conf.class_map()
+    blade, tower, nac = map_parts(cmap)  # one class a pixel, as the truth has
+    g_blade, g_tower, _ = map_parts(grown(cmap))
     # The classes' unions beside it: a pixel in masks of two classes counts for both.
     u_blade, u_nac = conf.of("blade").union(), conf.of("nacelle").union()
     u_tower = conf.of("tower").union() | u_nac
@@ -235,7 +236,7 @@ def measure(photo: R.RealPhoto, model, args, refiner: Path | None = None) -> dic
            "blade_iou": iou(blade, sem == R.BLADE), "tower_iou": iou(tower, sem == R.TOWER),
            "blade_iou_union": iou(u_blade, sem == R.BLADE),
            "tower_iou_union": iou(u_tower, sem == R.TOWER),
-           "blade_iou_grown": iou(g == 1, sem == R.BLADE), "tower_iou_grown": iou(g >= 2, sem == R.TOWER)}
+           "blade_iou_grown": iou(g_blade, sem == R.BLADE), "tower_iou_grown": iou(g_tower, sem == R.TOWER)}
     rec["_tint"] = outline_tint(img, sem == R.BLADE, blade)
     split = R.split_semantic(sem)
     true_nac = split.instances.of("nacelle")
