@@ -470,6 +470,9 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--refiner", default=None,
                     help="edge refiner weights (default: the shipped models/wtseg-refine.pt)")
     ap.add_argument("--no-refine", action="store_true", help="skip the refined figures")
+    ap.add_argument("--mirror-model", default="auto",
+                    help="the network reading the mirror pass: auto (the model's NAME.mirror.pt, "
+                         "where there is one) | none (the model itself) | a weights file")
     ap.add_argument("--out", default=None)
     a = ap.parse_args(argv)
     if a.dev and not a.out:
@@ -485,8 +488,9 @@ def main(argv: list[str] | None = None) -> dict:
         return str(path.relative_to(ROOT) if path.is_relative_to(ROOT) else path)
 
     weights = resolve_weights(a.model)
-    model = load_model(weights, "cpu", a.precision)
+    model = load_model(weights, "cpu", a.precision, mirror=a.mirror_model)
     result: dict = {"model": shown(weights),
+                    "mirror_model": None if model.mirror_weights is None else shown(Path(model.mirror_weights)),
                     # the network's working size (shorter side, longer side at most)
                     "working_size": [int(model.transform.min_size[0]), int(model.transform.max_size)]}
     result["precision"] = model.precision
@@ -495,7 +499,8 @@ def main(argv: list[str] | None = None) -> dict:
     if not a.dev:
         log(f"speed ({a.speed_runs} runs each)")
         result["speed"] = speed(model, a.speed_runs, not a.no_stock,
-                                load_model(weights, "cpu", "fp32") if model.precision != "fp32" else None,
+                                load_model(weights, "cpu", "fp32", mirror=a.mirror_model)
+                                if model.precision != "fp32" else None,
                                 refiner)
     real = Path(a.real)
     # a refiner fine-tuned on the photos (train-refiner --real) has learned them as much

@@ -141,16 +141,21 @@ def tint_summary(parts: list[dict[str, np.ndarray]]) -> dict:
 
 
 def model_for_fold(args, seq: str, log) -> Path:
+    """Fold ``seq``'s network (and its mirror partner, ``NAME.mirror.pt`` beside it, where there
+    is one: both checked not to have learned ``seq``)."""
+    from wtcli.segment.model import mirror_weights
+
     if args.runs is None:
         path = Path(args.model) if args.model else ROOT / "models" / "wtseg-r18s.pt"
-        check_not_trained_on(path, seq)
-        return path
-    run = Path(args.runs) / seq
-    path = run / "model.pt"
-    _train_fold(path, seq, "model", args.train, "--train",
-                ["train", *(args.train or "").split(), "--real", str(args.real),
-                 "--real-holdout-sequence", seq, "--out", str(run)], run / "last.ckpt", log)
-    check_not_trained_on(path, seq)
+    else:
+        run = Path(args.runs) / seq
+        path = run / "model.pt"
+        _train_fold(path, seq, "model", args.train, "--train",
+                    ["train", *(args.train or "").split(), "--real", str(args.real),
+                     "--real-holdout-sequence", seq, "--out", str(run)], run / "last.ckpt", log)
+    for p in (path, mirror_weights(path)):
+        if p is not None:
+            check_not_trained_on(p, seq)
     return path
 
 
@@ -345,15 +350,16 @@ def main(argv: list[str] | None = None) -> dict:
     unknown = [n for n in names if n not in folds]
     if unknown:
         raise SystemExit(f"--only {unknown[0]}: not a sequence of {real} (it has: {', '.join(folds)})")
-    rows, models, refiners = [], {}, {}
+    rows, models, mirrors, refiners = [], {}, {}, {}
     secs = 0.0  # measuring only: training a fold and loading its model are not counted
     for seq in names:
         fold = folds[seq]
         if args.limit and len(fold) > args.limit:
             fold = [fold[int(k)] for k in np.linspace(0, len(fold) - 1, args.limit).round()]
         path = model_for_fold(args, seq, log)
-        models[seq] = str(path)
         model = load_model(path)
+        models[seq] = str(path)
+        mirrors[seq] = model.mirror_weights
         refiner = None if args.no_refine else refiner_for_fold(args, seq, log)
         refiners[seq] = None if refiner is None else str(refiner)
         t1 = time.perf_counter()
@@ -366,7 +372,7 @@ def main(argv: list[str] | None = None) -> dict:
     res = {
         "data": {"root": str(real), "photos_in_folder": len(photos),
                  "source": "WTA dataset, Zampokas et al., ICUAS 2022, doi:10.1109/ICUAS54217.2022.9836096"},
-        "models": models, "refiners": refiners,
+        "models": models, "mirror_models": mirrors, "refiners": refiners,
         "settings": {"refine": not args.no_refine, "fold_refiners": args.fold_refiners,
                      "max_side": args.max_side, "limit": args.limit,
                      "folds": names},

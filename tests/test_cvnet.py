@@ -35,6 +35,11 @@ def test_a_converted_file_of_other_weights_is_not_used(tmp_path):
     with open(tmp_path / cvnet.SOURCES[0], "ab") as f:
         f.write(b"\0")  # a retrained network
     assert not cvnet.available(tmp_path / cvnet.CONVERTED.name)
+    with open(tmp_path / cvnet.SOURCES[0], "wb") as f:
+        f.write((cvnet.MODELS_DIR / cvnet.SOURCES[0]).read_bytes())
+    assert cvnet.available(tmp_path / cvnet.CONVERTED.name)
+    shutil.copy(cvnet.MODELS_DIR / cvnet.SOURCES[0], tmp_path / cvnet.MIRROR)  # a pair: torch reads it
+    assert not cvnet.available(tmp_path / cvnet.CONVERTED.name)
     assert not cvnet.available(tmp_path / "missing.npz")
     (tmp_path / "bad.npz").write_bytes(b"not a zip")
     assert not cvnet.available(tmp_path / "bad.npz")

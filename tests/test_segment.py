@@ -896,10 +896,11 @@ def test_flip_gives_the_mirror_image_the_mirrored_answer():
     nacelle) the two directions may keep different proposals (the tower's box, up to 7.6 px apart
     with an earlier network), so every box but one must agree to the pixel. Instances are
     paired by mask, not by rank: two scoring within 0.001 (the nacelle and a blade tip, seen
-    with an earlier network) may swap places between the two."""
+    with an earlier network) may swap places between the two. One network reads both passes
+    here: with a mirror partner the photo and its mirror are read by different networks."""
     from wtcli.synth.render import render_sample
 
-    model = infer.load_model(None, "cpu")
+    model = infer.load_model(None, "cpu", mirror="none")
     s = render_sample(7_000_002, width=640, height=480, view="front")
     a = infer.predict(model, s.image, 0.3)
     b = infer.predict(model, np.ascontiguousarray(s.image[:, ::-1]), 0.3)
@@ -932,3 +933,60 @@ def test_evaluator_scores_the_class_map_beside_the_classes_unions():
     assert s["blade_mask_iou"] == pytest.approx(36 / 48)  # the union counts the hidden root
     assert s["blade_class_map_iou"] == 1.0 and s["tower_class_map_iou"] == 1.0
     assert s["nacelle_class_map_iou"] is None
+
+
+def test_a_mirror_partner_reads_the_mirror_pass(random_weights, tmp_path):
+    """``NAME.mirror.pt`` beside ``NAME.pt`` reads the mirror image: the detections change with
+    it and only with the mirror pass; a partner that is the same network gives exactly the
+    one-network answer; a partner whose masks sit elsewhere in their box is refused."""
+    import shutil
+
+    from wtcli.segment.model import mirror_weights
+
+    a = tmp_path / "net.pt"
+    shutil.copy(random_weights, a)
+    assert mirror_weights(a) is None
+    torch.manual_seed(1)
+    save_weights(build_model(), tmp_path / "net.mirror.pt", meta={"note": "another draw"})
+    assert mirror_weights(a) == tmp_path / "net.mirror.pt"
+    assert mirror_weights(tmp_path / "net.mirror.pt") is None  # a partner has none of its own
+    img = _image()
+
+    def run(mirror, flip=True):
+        m = infer.load_model(a, "cpu", mirror=mirror)
+        m.roi_heads.score_thresh = 0.0
+        return m, infer.predict(m, img, score_threshold=0.0, flip=flip)
+
+    pair, with_partner = run("auto")
+    alone, one_net = run("none")
+    assert pair.mirror_weights == str(tmp_path / "net.mirror.pt") and alone.mirror_weights is None
+    assert pair.mirror_partner is not None and alone.mirror_partner is None
+    assert not (len(with_partner) == len(one_net) and np.allclose(with_partner.scores, one_net.scores))
+    _, plain_a = run("auto", flip=False)
+    _, plain_b = run("none", flip=False)
+    assert np.array_equal(plain_a.scores, plain_b.scores)  # one pass: the model alone
+    shutil.copy(random_weights, tmp_path / "same.pt")
+    _, same = run(tmp_path / "same.pt")
+    assert np.array_equal(same.scores, one_net.scores) and np.array_equal(same.masks, one_net.masks)
+    torch.manual_seed(2)
+    save_weights(build_model(), tmp_path / "off.pt", meta={"mask_offset_px": 0.25})
+    with pytest.raises(ModelError, match="off.pt"):
+        infer.load_model(a, "cpu", mirror=tmp_path / "off.pt")
+
+
+def test_segment_records_the_mirror_model_and_refuses_a_missing_one(cli, photo_folder, random_weights,
+                                                                     tmp_path):
+    import shutil
+
+    a = tmp_path / "w" / "net.pt"
+    a.parent.mkdir()
+    shutil.copy(random_weights, a)
+    shutil.copy(random_weights, a.with_name("net.mirror.pt"))
+    for extra, want in (((), str(a.with_name("net.mirror.pt"))), (("--mirror-model", "none"), None),
+                        (("--no-flip",), None)):
+        res = cli("segment", photo_folder, "--out", tmp_path / "o", "--model", a, "--json", *extra)
+        assert res.exit_code == 0, res.stderr
+        assert json.loads(res.stdout)["settings"]["mirror_model"] == want
+    res = cli("segment", photo_folder, "--out", tmp_path / "o2", "--model", a,
+              "--mirror-model", tmp_path / "missing.pt")
+    assert res.exit_code == ExitCode.MODEL and "missing.pt" in res.stderr

@@ -44,6 +44,11 @@ def segment(
                                        "CPU that does bf16 natively (faster, as accurate), else fp32."),
     model: Optional[Path] = typer.Option(None, "--model", "-m",
                                          help="Weights file (default: models/wtseg-r18s.pt)."),
+    mirror_model: Optional[str] = typer.Option(
+        None, "--mirror-model",
+        help="Weights of another network to read the mirror image, e.g. a second training "
+             "of the model's recipe (default: NAME.mirror.pt beside the model NAME.pt, where "
+             "there is one; none ships; 'none': the model reads both)."),
     recursive: bool = typer.Option(False, "--recursive", "-r", help="Look in subfolders too."),
     resume: bool = typer.Option(False, "--resume",
                                 help="Skip photos whose outputs already exist in --out."),
@@ -64,7 +69,7 @@ def segment(
     writable_folder(out)  # a read-only or blocked --out fails now, not after the model ran
     _, files = find_images(path, recursive)  # errors (no such path, empty folder) before loading
     weights = resolve_weights(model)
-    net = load_model(weights, device, precision)
+    net = load_model(weights, device, precision, mirror=mirror_model or "auto")
     if refine:
         load_refiner(refiner, net.precision)  # a missing refiner is refused before any photo
 
@@ -78,7 +83,8 @@ def segment(
                                 score_threshold=score_threshold)
     settings = {"score_threshold": score_threshold, "max_size": max_size, "zoom": zoom,
                 "wide": wide, "flip": flip,
-                "model": str(weights), "refiner": str(resolve_refiner(refiner)) if refine else None,
+                "model": str(weights), "mirror_model": net.mirror_weights if flip else None,
+                "refiner": str(resolve_refiner(refiner)) if refine else None,
                 "device": str(next(net.parameters()).device), "precision": net.precision}
     report = write_batch_files(out, results, settings)
 

@@ -38,6 +38,7 @@ from wtcli.segment.post import MIRROR_BOX_SHIFT_PX
 MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
 CONVERTED = MODELS_DIR / "wtseg-r18s.cv2.npz"
 SOURCES = ("wtseg-r18s.pt", "wtseg-refine.pt")  # what the converted file is made from
+MIRROR = "wtseg-r18s.mirror.pt"  # a mirror network put beside them: torch reads the pair, this file cannot
 FORMAT = 1
 BOX_CLIP = math.log(1000.0 / 16)
 
@@ -52,7 +53,8 @@ def _sha256(path: Path) -> str:
 
 def available(path: Path = CONVERTED) -> bool:
     """Whether the converted file is there and was made from the ``.pt`` files now beside it
-    (each compared by SHA-256, about 30 ms for both)."""
+    (each compared by SHA-256, about 30 ms for both), and no mirror network lies beside them
+    (``infer.load_model`` would read the mirror pass with it; this file holds one network)."""
     if not path.is_file():
         return False
     try:
@@ -60,7 +62,7 @@ def available(path: Path = CONVERTED) -> bool:
             meta = json.loads(bytes(z["meta"]).decode())
     except (OSError, ValueError, KeyError):
         return False
-    if meta.get("format") != FORMAT:
+    if meta.get("format") != FORMAT or (path.parent / MIRROR).is_file():
         return False
     for name in SOURCES:
         src = path.parent / name

@@ -7,7 +7,8 @@ and thresholded, so masks, boxes and the background-removed image line up with t
 photo. Masks are pasted one instance at a time, into their box only, and cut at
 ``MASK_THRESHOLD`` of their class. With ``flip`` (the default) the photo and its mirror image
 are detected together: proposals, class scores, boxes and masks of both passes averaged
-(``_detect_both``).
+(``_detect_both``), the mirror read by a second network where the weights have one beside them
+(``NAME.mirror.pt``) or one is named.
 """
 
 from __future__ import annotations
@@ -21,11 +22,12 @@ import numpy as np
 import torch
 
 # model first: it imports torchvision the quick way (model._import_torchvision)
-from wtcli.segment.model import (backbone_in_bf16, build_model, load_weights, pick_device,
-                                 resolve_precision, resolve_weights, set_infer_size)
+from wtcli.segment.model import (backbone_in_bf16, build_model, load_weights, mirror_weights,
+                                 pick_device, resolve_precision, resolve_weights, set_infer_size)
 from torchvision.models.detection.image_list import ImageList  # noqa: I001
 from torchvision.ops import boxes as box_ops
 
+from wtcli.errors import ModelError
 from wtcli.masks import Instances
 from wtcli.segment import post
 from wtcli.segment.data import image_tensor
@@ -39,20 +41,26 @@ from wtcli.segment.post import (DUPLICATE_INSIDE, MASK_OFFSET_PX, MASK_THRESHOLD
 
 
 _CACHE: dict[tuple, torch.nn.Module] = {}
-_LOCK = threading.Lock()
+_LOCK = threading.RLock()  # re-entered: a network loads its mirror partner
 
 
 def load_model(weights: str | Path | None = None, device: str | torch.device | None = None,
-               precision: str | None = None):
+               precision: str | None = None, mirror: str | Path | None = "auto"):
     """Build the network and load weights (default: the shipped ``models/`` file); cached per
-    (path, device, precision), so a batch or a chained command loads it once. ``precision``:
-    auto (None) | fp32 | bf16 (``model.resolve_precision``); the model's ``precision`` says
-    which it runs in."""
+    (path, device, precision, mirror), so a batch or a chained command loads it once.
+    ``precision``: auto (None) | fp32 | bf16 (``model.resolve_precision``); the model's
+    ``precision`` says which it runs in. ``mirror``: the network that reads the mirror pass
+    (``_detect_both``): "auto", the weights' ``NAME.mirror.pt`` when there is one
+    (``model.mirror_weights``); None or "none", the same network; or a weights file. The
+    model's ``mirror_partner`` is that network (None: itself), ``mirror_weights`` its file."""
     dev = device if isinstance(device, torch.device) else pick_device(device)
     prec = resolve_precision(precision, dev)
     path = resolve_weights(weights)
-    stamp = path.stat().st_mtime_ns if path.is_file() else None
-    key = (str(path.resolve()) if path.exists() else str(path), str(dev), stamp, prec)
+    if isinstance(mirror, str) and mirror in ("auto", "none"):
+        partner = mirror_weights(path) if mirror == "auto" else None
+    else:
+        partner = None if mirror is None else Path(mirror)
+    key = (_file_key(path), str(dev), prec, None if partner is None else _file_key(partner))
     with _LOCK:
         if key not in _CACHE:
             model = build_model()
@@ -65,8 +73,21 @@ def load_model(weights: str | Path | None = None, device: str | torch.device | N
             model.eval().to(dev)
             backbone_in_bf16(model, prec == "bf16")
             model.precision = prec
+            model.mirror_partner, model.mirror_weights = None, None
+            if partner is not None:
+                other = load_model(partner, dev, prec, mirror=None)
+                if other.mask_offset_px != model.mask_offset_px:  # the two passes' masks are averaged
+                    raise ModelError(f"{partner}: its masks sit {other.mask_offset_px} px in their "
+                                     f"box, {path}'s {model.mask_offset_px} px: not a mirror partner "
+                                     "for it")
+                model.mirror_partner, model.mirror_weights = other, str(partner)
             _CACHE[key] = model
         return _CACHE[key]
+
+
+def _file_key(path: Path) -> tuple:
+    return (str(path.resolve()) if path.exists() else str(path),
+            path.stat().st_mtime_ns if path.is_file() else None)
 
 
 def _device_of(model: torch.nn.Module) -> torch.device:
@@ -140,7 +161,8 @@ def _detect_both(model, images, feats: dict) -> dict:
     passes (those of the mirror mirrored back), each scored and regressed by the box head in
     both passes and the two averaged (class probabilities; boxes, the mirror's mirrored back),
     then torchvision's selection (score floor, per-class NMS, the best
-    ``detections_per_img``); each kept box's mask is the mean of both passes' masks.
+    ``detections_per_img``); each kept box's mask is the mean of both passes' masks. The
+    mirror is read by the model's ``mirror_partner`` where it has one (``load_model``).
 
     A detection one pass scores low is kept when the other scores it well, and the two passes'
     pixel jitter on thin blades partly cancels. On 300 development renders
@@ -150,18 +172,19 @@ def _detect_both(model, images, feats: dict) -> dict:
     T = images.tensors.flip(-1)
     W = T.shape[-1]
     h, w = images.image_sizes[0]
-    feats_m = model.backbone(T)
+    other = getattr(model, "mirror_partner", None) or model  # the network reading the mirror
+    feats_m = other.backbone(T)
     # The padded tensor's photo sits at its right in the mirror: the mirror's "image" is the
     # whole width, and proposals starting in the padding are dropped once mirrored back.
     mirror_size = [(h, W)]
     p_plain = model.rpn(images, feats)[0][0]
-    p_mirror = model.rpn(ImageList(T, mirror_size), feats_m)[0][0]
+    p_mirror = other.rpn(ImageList(T, mirror_size), feats_m)[0][0]
     # Proposals are mirrored back exactly: they only need to be near, the box head refines them.
     p_mirror = torch.stack([W - p_mirror[:, 2], p_mirror[:, 1], W - p_mirror[:, 0], p_mirror[:, 3]], 1)
     proposals = box_ops.clip_boxes_to_image(
         torch.cat([p_plain, p_mirror[p_mirror[:, 0] < w - 1]]), (h, w))
     prob, boxes = _box_head(model, feats, proposals, images.image_sizes)
-    prob_m, boxes_m = _box_head(model, feats_m, mirror_boxes(proposals, W), mirror_size)
+    prob_m, boxes_m = _box_head(other, feats_m, mirror_boxes(proposals, W), mirror_size)
     prob = 0.5 * (prob + prob_m)
     boxes = 0.5 * (boxes + unmirror_boxes(boxes_m, W))
     # torchvision's RoIHeads.postprocess_detections from here on, on the averaged values
@@ -176,7 +199,7 @@ def _detect_both(model, images, feats: dict) -> dict:
     keep = box_ops.batched_nms(boxes, scores, labels, rh.nms_thresh)[: rh.detections_per_img]
     boxes, scores, labels = boxes[keep], scores[keep], labels[keep]
     masks = 0.5 * (_mask_probs(model, feats, boxes, labels, images.image_sizes)
-                   + _mask_probs(model, feats_m, mirror_boxes(boxes, W), labels, mirror_size).flip(-1))
+                   + _mask_probs(other, feats_m, mirror_boxes(boxes, W), labels, mirror_size).flip(-1))
     return {"boxes": boxes, "labels": labels, "scores": scores, "masks": masks[:, None]}
 
 

@@ -330,6 +330,21 @@ def resolve_weights(path: str | Path | None = None) -> Path:
     return MODELS_DIR / DEFAULT_WEIGHTS
 
 
+MIRROR_SUFFIX = ".mirror.pt"
+
+
+def mirror_weights(path: str | Path) -> Path | None:
+    """The network that reads the mirror pass of the weights file ``path``: ``NAME.mirror.pt``
+    beside ``NAME.pt`` when there is one (e.g. a second training of the same recipe, another
+    seed: the two passes then average two networks, not one network twice; docs/segment.md,
+    "A second network on the mirror pass"), else None. A ``.mirror.pt`` file itself has none."""
+    p = Path(path)
+    if p.suffix != ".pt" or p.name.endswith(MIRROR_SUFFIX):
+        return None
+    m = p.with_name(p.name[: -len(".pt")] + MIRROR_SUFFIX)
+    return m if m.is_file() else None
+
+
 def load_weights(model: nn.Module, path: str | Path | None = None) -> dict[str, Any]:
     """Fill ``model`` from a weights file (ours, or a training checkpoint); return its meta.
 
