@@ -141,21 +141,16 @@ def tint_summary(parts: list[dict[str, np.ndarray]]) -> dict:
 
 
 def model_for_fold(args, seq: str, log) -> Path:
-    """Fold ``seq``'s network (and its mirror partner, ``NAME.mirror.pt`` beside it, where there
-    is one: both checked not to have learned ``seq``)."""
-    from wtcli.segment.model import mirror_weights
-
     if args.runs is None:
         path = Path(args.model) if args.model else ROOT / "models" / "wtseg-r18s.pt"
-    else:
-        run = Path(args.runs) / seq
-        path = run / "model.pt"
-        _train_fold(path, seq, "model", args.train, "--train",
-                    ["train", *(args.train or "").split(), "--real", str(args.real),
-                     "--real-holdout-sequence", seq, "--out", str(run)], run / "last.ckpt", log)
-    for p in (path, mirror_weights(path)):
-        if p is not None:
-            check_not_trained_on(p, seq)
+        check_not_trained_on(path, seq)
+        return path
+    run = Path(args.runs) / seq
+    path = run / "model.pt"
+    _train_fold(path, seq, "model", args.train, "--train",
+                ["train", *(args.train or "").split(), "--real", str(args.real),
+                 "--real-holdout-sequence", seq, "--out", str(run)], run / "last.ckpt", log)
+    check_not_trained_on(path, seq)
     return path
 
 
@@ -358,6 +353,8 @@ def main(argv: list[str] | None = None) -> dict:
             fold = [fold[int(k)] for k in np.linspace(0, len(fold) - 1, args.limit).round()]
         path = model_for_fold(args, seq, log)
         model = load_model(path)
+        if model.mirror_weights:  # the network reading its mirror pass (NAME.mirror.pt) too
+            check_not_trained_on(Path(model.mirror_weights), seq)
         models[seq] = str(path)
         mirrors[seq] = model.mirror_weights
         refiner = None if args.no_refine else refiner_for_fold(args, seq, log)
