@@ -136,8 +136,8 @@ def test_out_is_a_folder_or_under_a_file(cli, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["d", "f"] and not any(folder.iterdir())
 
 
-def test_disk_full_names_each_photo_and_leaves_no_temporaries(cli, photos, weights, tmp_path,
-                                                              monkeypatch):
+def test_disk_full_stops_the_batch_naming_the_file_and_leaves_no_temporaries(cli, photos, weights,
+                                                                             tmp_path, monkeypatch):
     out = tmp_path / "out"
     real_replace = os.replace
 
@@ -148,12 +148,14 @@ def test_disk_full_names_each_photo_and_leaves_no_temporaries(cli, photos, weigh
 
     monkeypatch.setattr("wtcli.jsonio.os.replace", full)
     r = cli("segment", photos, "--out", out, "--model", weights, *FAST)
-    assert r.exit_code == 9, r.stderr[-500:]
+    # Every later photo would fail the same way after the network ran: the batch stops, exit 3.
+    assert r.exit_code == 3, r.stderr[-500:]
+    assert "overlay/a.png: cannot write (No space left on device)" in r.stderr.splitlines()[-1]
+    assert "stopped with 1 photo(s) not done" in r.stderr
     report = json.loads((out / "report.json").read_text())
     errors = {im["file"]: im["error"] for im in report["images"]}
-    for name in ("a", "b"):
-        err = errors[f"{name}.{'png' if name == 'a' else 'jpg'}"]
-        assert f"overlay/{name}.png: cannot write (No space left on device)" in err, err
+    assert list(errors) == ["a.png"], errors
+    assert "overlay/a.png: cannot write (No space left on device)" in errors["a.png"]
     assert temp_leftovers(out) == []
     assert not (out / "instances.json").exists() and report["instances"] is None
 

@@ -304,3 +304,47 @@ def test_plan_uses_the_photos_own_pose_and_says_so(cli, tmp_path, monkeypatch):
     photo.rename(tmp_path / "moved.jpg")  # the photo gone: S_p, as before
     r = cli("plan", yml, f"T1={pj}", "--out", tmp_path / "sp2.json")
     assert r.exit_code == 5 and "not spread like a 3-blade rotor" in " ".join(r.output.split())
+
+
+def test_a_photo_stored_turned_does_not_give_its_own_pose(tmp_path):
+    """segment reads a photo upright (its EXIF Orientation); the gimbal's angles are of the
+    frame as stored, so plan does not back-project with them and says why."""
+    from wtcli.photo_pose import camera_pose_of_photo, read_photo_metadata
+
+    t = Turbine.with_rotor_azimuth(90, id="T1", base=(0, 0, 0), hub_height=80, rotor_diameter=90,
+                                   yaw_deg=180)
+    mission = SimpleNamespace(site_origin=ORIGIN, camera=Camera(640, 480, 16, 23.2))
+    img = np.full((48, 64, 3), 90, np.uint8)
+    lat, lon, h = enu_to_geodetic(np.array([[0.0, -150.0, 80.0]]), ORIGIN)[0]
+    p = dji_photo(tmp_path / "DJI_0003.JPG", img, lat, lon, h, h - ORIGIN["alt"], 0.0, 0.0)
+    upright = camera_pose_of_photo(p, t, mission)
+    assert upright[0] is not None
+    for orientation, used in ((1, True), (6, False), (3, False)):
+        turned = b"Exif\0\0II*\0" + struct.pack("<IH", 8, 1) \
+            + struct.pack("<HHIHH", 0x0112, 3, 1, orientation, 0) + struct.pack("<I", 0)
+        data = p.read_bytes()
+        q = tmp_path / f"o{orientation}.jpg"
+        q.write_bytes(data[:2] + b"\xff\xe1" + struct.pack(">H", len(turned) + 2) + turned + data[2:])
+        meta = read_photo_metadata(q)
+        assert meta.orientation == orientation and "orientation" not in meta.where
+        pose, how = camera_pose_of_photo(q, t, mission)
+        assert (pose is not None) is used
+        if used:
+            assert how == upright[1]  # the Orientation tag is not named as a source of the pose
+        else:
+            assert f"EXIF Orientation {orientation}" in how and "--camera-pose" in how
+    plain = tmp_path / "plain.jpg"  # an Orientation tag alone is no pose: nothing to say
+    turned = b"Exif\0\0II*\0" + struct.pack("<IH", 8, 1) + struct.pack("<HHIHH", 0x0112, 3, 1, 1, 0) \
+        + struct.pack("<I", 0)
+    plain.write_bytes(jpeg_with(img, turned))
+    assert camera_pose_of_photo(plain, t, mission) == (None, None)
+
+
+def test_a_photo_turned_upright_keeps_the_cameras_angle_per_pixel():
+    from wtcli.plan.zone import photo_camera
+
+    cam = Camera(4000, 3000, 10.3, 13.2)
+    land = photo_camera(cam, 1920, 1440, (0, -50, 80), (0, 0, 80))
+    port = photo_camera(cam, 1440, 1920, (0, -50, 80), (0, 0, 80))
+    assert land.fx == pytest.approx(cam.fx * 1920 / 4000) and land.sensor_width_mm == pytest.approx(13.2)
+    assert port.fx == pytest.approx(land.fx)

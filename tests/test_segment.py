@@ -990,3 +990,138 @@ def test_segment_records_the_mirror_model_and_refuses_a_missing_one(cli, photo_f
     res = cli("segment", photo_folder, "--out", tmp_path / "o2", "--model", a,
               "--mirror-model", tmp_path / "missing.pt")
     assert res.exit_code == ExitCode.MODEL and "missing.pt" in res.stderr
+
+
+# ---- a real photo folder's edges ---------------------------------------------------------------
+def _fake_segment(monkeypatch):
+    """segment_image replaced by one blade down the middle of any photo (no network)."""
+    def fake(img, net, score_threshold, *args, **kwargs):
+        h, w = img.shape[:2]
+        m = np.zeros((1, h, w), bool)
+        m[:, :, w // 2 - 2:w // 2 + 2] = True
+        return Instances(np.array(["blade"], dtype=object), m, np.array([0.9]))
+    monkeypatch.setattr(infer, "segment_image", fake)
+
+
+def test_output_names_keep_apart_photos_that_would_share_one():
+    names = batch.output_names(["dup.jpg", "dup.png", "a.jpg", "s/x.jpg", "t/x.jpg",
+                                "IMG_1.jpg", "IMG_1.JPG", "b.JPG"])
+    assert names == {"dup.jpg": "dup.jpg", "dup.png": "dup.png", "a.jpg": "a",
+                     "s/x.jpg": "s/x", "t/x.jpg": "t/x", "IMG_1.JPG": "IMG_1.JPG",
+                     "IMG_1.jpg": "IMG_1.jpg~2", "b.JPG": "b"}
+    assert len({n.casefold() for n in names.values()}) == len(names)  # apart on any disk
+
+
+def test_photos_sharing_a_name_keep_their_own_results_and_resume(cli, tmp_path, random_weights,
+                                                                  monkeypatch):
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    cv2.imwrite(str(folder / "dup.jpg"), _image(seed=1))
+    cv2.imwrite(str(folder / "dup.png"), _image(60, 80, seed=2))
+    _fake_segment(monkeypatch)
+    out = tmp_path / "seg"
+    for resume in ((), ("--resume",)):
+        res = cli("segment", folder, "--out", out, "--model", random_weights, "--no-refine",
+                  "--json", *resume)
+        assert res.exit_code == 0, res.stderr
+        rows = {r["file"]: r for r in json.loads(res.stdout)["images"]}
+        assert {f: r["status"] for f, r in rows.items()} == \
+            {"dup.jpg": "skipped" if resume else "ok", "dup.png": "skipped" if resume else "ok"}
+        assert rows["dup.jpg"]["outputs"]["overlay"] != rows["dup.png"]["outputs"]["overlay"]
+        sizes = {img["file_name"]: (img["width"], img["height"])
+                 for img, _ in read_instances(out / "instances.json")}
+        assert sizes == {"dup.jpg": (160, 120), "dup.png": (80, 60)}
+    assert cv2.imread(str(out / "overlay" / "dup.png.png")).shape == (60, 80, 3)
+    assert cv2.imread(str(out / "overlay" / "dup.jpg.png")).shape == (120, 160, 3)
+
+
+def test_resume_redoes_a_photo_replaced_under_its_name_and_refuses_other_settings(
+        cli, photo_folder, random_weights, tmp_path, monkeypatch):
+    _fake_segment(monkeypatch)
+    out = tmp_path / "seg"
+    args = ("segment", photo_folder, "--out", out, "--model", random_weights, "--no-refine")
+    assert cli(*args).exit_code == 0
+    cv2.imwrite(str(photo_folder / "a.png"), _image(60, 80, seed=9))  # another flight's a.png
+    res = cli(*args, "--resume", "--json")
+    assert res.exit_code == 0, res.stderr
+    rows = {r["file"]: r for r in json.loads(res.stdout)["images"]}
+    assert rows["a.png"]["status"] == "ok" and rows["a.png"]["width"] == 80
+    assert rows["b.jpg"]["status"] == "skipped"
+    res = cli(*args, "--resume", "--score-threshold", "0.3")
+    assert res.exit_code == ExitCode.CONFIG
+    assert "score_threshold 0.5" in res.stderr and "0.3" in res.stderr and "a.json" in res.stderr
+    assert cli(*args, "--resume", "--no-flip").exit_code == ExitCode.CONFIG
+
+
+def test_recursive_never_reads_an_output_folder_as_photos(cli, photo_folder, random_weights,
+                                                          tmp_path, monkeypatch):
+    _fake_segment(monkeypatch)
+    for out in (photo_folder / "seg", photo_folder / "seg2"):  # a second --out in the folder too
+        for _ in range(2):
+            res = cli("segment", photo_folder, "-r", "--out", out, "--model", random_weights,
+                      "--no-refine", "--json")
+            assert res.exit_code == 0, res.stderr
+            assert [r["file"] for r in json.loads(res.stdout)["images"]] == \
+                ["a.png", "b.jpg", str(Path("sub") / "c.tif")]
+
+
+def test_an_output_that_cannot_be_written_stops_the_batch_keeping_what_is_done(
+        cli, photo_folder, random_weights, tmp_path, monkeypatch):
+    from wtcli.errors import OutputError
+
+    _fake_segment(monkeypatch)
+    real = batch.atomic_write_bytes
+
+    def full_disk(path, data):
+        if "b" in Path(path).stem:
+            raise OutputError(f"{path}: cannot write (no space left on device)")
+        return real(path, data)
+    monkeypatch.setattr(batch, "atomic_write_bytes", full_disk)
+    (photo_folder / "c.png").write_bytes((photo_folder / "a.png").read_bytes())
+    out = tmp_path / "seg"
+    res = cli("segment", photo_folder, "--out", out, "--model", random_weights, "--no-refine")
+    assert res.exit_code == ExitCode.INPUT, res.stderr
+    assert "no space left" in res.stderr and "stopped with 1 photo(s) not done" in res.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert [(r["file"], r["status"]) for r in report["images"]] == [("a.png", "ok"), ("b.jpg", "error")]
+    assert (out / "instances" / "a.json").is_file() and not (out / "instances" / "c.json").exists()
+
+
+def test_a_blocked_output_subfolder_fails_before_the_model(cli, photo_folder, tmp_path):
+    out = tmp_path / "seg"
+    out.mkdir()
+    (out / "overlay").write_text("a file where the overlays go")
+    res = cli("segment", photo_folder, "--out", out, "--model", tmp_path / "missing.pt")
+    assert res.exit_code == ExitCode.INPUT  # not 7: the weights were never looked at
+    assert "overlay" in res.stderr
+
+
+def test_a_strip_photo_is_refused_by_name_and_the_batch_goes_on(cli, photo_folder, random_weights,
+                                                                tmp_path):
+    cv2.imwrite(str(photo_folder / "strip.png"), np.full((9, 2000, 3), 120, np.uint8))
+    res = cli("segment", photo_folder, "--out", tmp_path / "seg", "--model", random_weights,
+              "--no-refine")
+    assert res.exit_code == ExitCode.PARTIAL, res.stderr
+    line = next(ln for ln in res.stderr.splitlines() if ln.startswith("failed: "))
+    assert "strip.png: image is too narrow (2000x9)" in line
+    res = cli("segment", photo_folder / "strip.png", "--out", tmp_path / "one", "--model",
+              random_weights)
+    assert res.exit_code == ExitCode.INPUT and "too narrow" in res.stderr
+
+
+def test_a_photo_is_read_upright_as_its_exif_orientation_says(tmp_path):
+    import struct
+
+    img = _image(seed=5)  # 120 x 160
+    ok, buf = cv2.imencode(".jpg", img)
+    tiff = b"II*\0" + struct.pack("<IH", 8, 1) + struct.pack("<HHIHH", 0x0112, 3, 1, 6, 0) \
+        + struct.pack("<I", 0)
+    app1 = b"Exif\0\0" + tiff
+    data = buf.tobytes()
+    path = tmp_path / "turned.jpg"
+    path.write_bytes(data[:2] + b"\xff\xe1" + struct.pack(">H", len(app1) + 2) + app1 + data[2:])
+    got = batch.read_image(path)
+    assert got.shape == (160, 120, 3)  # Orientation 6: turned a quarter clockwise to be shown
+    want = cv2.rotate(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR),
+                      cv2.ROTATE_90_CLOCKWISE)
+    assert np.abs(got.astype(int) - want.astype(int)).max() <= 1

@@ -54,6 +54,7 @@ class PhotoMetadata:
     gimbal_pitch_deg: float | None = None
     gimbal_roll_deg: float | None = None
     flight_yaw_deg: float | None = None
+    orientation: int | None = None  # EXIF Orientation: 1 upright; 2-8 turned or mirrored to show
     where: dict = field(default_factory=dict)  # field -> "EXIF GPS" / "DJI XMP"
 
     @property
@@ -96,7 +97,8 @@ def app1_segments(data: bytes, name: str = "photo") -> list[bytes]:
 
 
 def _exif_gps(tiff: bytes) -> dict:
-    """lat, lon, gps_alt_m from the GPS IFD of a TIFF/EXIF block (empty when absent)."""
+    """lat, lon, gps_alt_m from the GPS IFD of a TIFF/EXIF block, and the Orientation tag of
+    its first IFD as ``orientation`` (each absent when the block does not carry it)."""
     if len(tiff) < 8 or tiff[:2] not in (b"II", b"MM"):
         return {}
     e = "<" if tiff[:2] == b"II" else ">"
@@ -139,13 +141,16 @@ def _exif_gps(tiff: bytes) -> dict:
 
     (first,) = struct.unpack(e + "I", tiff[4:8])
     ifd0 = ifd(first)
+    out = {}
+    turned = value(ifd0[0x0112]) if 0x0112 in ifd0 else []
+    if turned and 1 <= turned[0] <= 8:
+        out["orientation"] = int(turned[0])
     if 0x8825 not in ifd0:
-        return {}
+        return out
     gps_off = value(ifd0[0x8825])
     if not gps_off:
-        return {}
+        return out
     g = ifd(int(gps_off[0]))
-    out = {}
 
     def dms(tag_ref: int, tag: int, neg: str) -> float | None:
         if tag not in g:
@@ -229,6 +234,7 @@ def read_photo_metadata(path: str | Path) -> PhotoMetadata:
             vals[k], where[k] = vals[f"xmp_{k}"], "DJI XMP"
     vals.pop("xmp_lat", None)
     vals.pop("xmp_lon", None)
+    where.pop("orientation", None)  # not a pose tag: never named as a pose's source
     where.pop("xmp_lat", None)
     where.pop("xmp_lon", None)
     if "lat" in vals and not (-90 <= vals["lat"] <= 90 and -180 <= vals.get("lon", 0) <= 180):
@@ -328,10 +334,16 @@ def camera_pose_of_photo(path: str | Path, turbine, mission, name: str | None = 
     (None, why not) when it carries an incomplete pose, or (None, None) when it carries none."""
     meta = read_photo_metadata(path)
     name = name or str(path)
+    if meta.orientation not in (None, 1) and (meta.has_pose or meta.gimbal_pitch_deg is not None):
+        # segment reads the photo upright, as a viewer shows it; the gimbal's angles are of the
+        # frame as stored, and which way the camera was turned is not known from the tag alone.
+        return None, (f"the photo is stored turned (EXIF Orientation {meta.orientation}) and read "
+                      "upright, so its gimbal angles do not give the upright frame's pose; give "
+                      "--camera-pose")
     if meta.has_pose:
         pp = pose_from_metadata(meta, turbine, mission.site_origin, mission.camera, name)
         return pp.camera_pose(), pp.description
-    if meta == PhotoMetadata():
+    if meta == PhotoMetadata(orientation=meta.orientation):
         return None, None
     need = {"a position": meta.has_position, "GimbalPitchDegree": meta.gimbal_pitch_deg is not None,
             "a heading": meta.gimbal_yaw_deg is not None or meta.flight_yaw_deg is not None,

@@ -58,7 +58,7 @@ def segment(
     from rich.table import Table
 
     from wtcli.console import count_bar, err_console
-    from wtcli.errors import InputError, PartialFailure
+    from wtcli.errors import InputError, OutputError, PartialFailure
     from wtcli.jsonio import dumps
     from wtcli.segment.batch import FOUND, find_images, segment_paths, write_batch_files
     from wtcli.segment.infer import load_model, segment_image
@@ -66,8 +66,11 @@ def segment(
     from wtcli.segment.refine import load_refiner, resolve_refiner
 
     from wtcli.outputs import writable_folder
-    writable_folder(out)  # a read-only or blocked --out fails now, not after the model ran
-    _, files = find_images(path, recursive)  # errors (no such path, empty folder) before loading
+    from wtcli.segment.batch import SUBFOLDERS
+    # A read-only or blocked --out (or a subfolder of it) fails now, not after the model ran.
+    for folder in (out, *(out / sub for sub in SUBFOLDERS)):
+        writable_folder(folder)
+    _, files = find_images(path, recursive, out)  # errors (no such path, empty folder) before loading
     weights = resolve_weights(model)
     net = load_model(weights, device, precision, mirror=mirror_model or "auto")
     if refine:
@@ -77,15 +80,16 @@ def segment(
         return segment_image(img, net, score_threshold, max_size, candidate_floor=None, zoom=zoom,
                              flip=flip, refine=refine, refiner=refiner, wide=wide)
 
-    with count_bar("segment", len(files)) as advance:
-        results = segment_paths(path, out, run, recursive=recursive, resume=resume,
-                                on_progress=lambda res: advance(f"{res.rel} {res.status}"),
-                                score_threshold=score_threshold)
     settings = {"score_threshold": score_threshold, "max_size": max_size, "zoom": zoom,
                 "wide": wide, "flip": flip,
                 "model": str(weights), "mirror_model": net.mirror_weights if flip else None,
                 "refiner": str(resolve_refiner(refiner)) if refine else None,
                 "device": str(next(net.parameters()).device), "precision": net.precision}
+    with count_bar("segment", len(files)) as advance:
+        batch = segment_paths(path, out, run, recursive=recursive, resume=resume,
+                              on_progress=lambda res: advance(f"{res.rel} {res.status}"),
+                              score_threshold=score_threshold, settings=settings)
+    results = batch.results
     report = write_batch_files(out, results, settings)
 
     found = report["n_found"]  # photos by what they hold: rotor, single blade, tower only, nothing
@@ -100,11 +104,18 @@ def segment(
                       str(c.get("blade", "")), str(c.get("tower", "")), str(c.get("nacelle", "")),
                       (r.error or "")[:80], style="red" if r.status == "error" else None)
     err_console.print(table)
+    for r in results:  # whole, one line each: the table cuts them, and a log wraps its cells
+        if r.status == "error":
+            err_console.print(f"failed: {r.error}", soft_wrap=True)
     bad = report["n_failed"]
     err_console.print(f"{len(results) - bad}/{len(results)} image(s) segmented"
                       + (f" ({report['n_skipped']} already done)" if report["n_skipped"] else ""))
     if json_out:
         typer.echo(dumps(report))
+    if batch.stopped is not None:
+        left = len(files) - len(results)
+        raise OutputError(f"{batch.stopped}; stopped with {left} photo(s) not done (those done "
+                          f"are kept: fix it and rerun with --resume)")
     if bad:
         if len(results) == 1 and path.is_file():
             raise InputError(results[0].error)

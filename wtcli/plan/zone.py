@@ -77,8 +77,11 @@ def default_photo_camera(turbine: Turbine, camera: Camera, z: Zone | None = None
 
 def photo_camera(camera: Camera, width_px: int, height_px: int, position, look_at,
                  roll_deg: float = 0.0) -> Camera:
-    """The camera intrinsics at a photo's resolution (a resized photo keeps the field of view)."""
-    cam = Camera(int(width_px), int(height_px), camera.focal_mm, camera.sensor_width_mm)
+    """The camera intrinsics at a photo's resolution (a resized photo keeps the field of view).
+    The scale goes by the longer sides, so a photo turned upright (portrait, of a landscape
+    camera) keeps the camera's angle per pixel."""
+    fx = camera.fx * max(width_px, height_px) / max(camera.width_px, camera.height_px)
+    cam = Camera(int(width_px), int(height_px), camera.focal_mm, camera.focal_mm * width_px / fx)
     return cam.with_pose(np.asarray(position, float),
                          look_at_rotation(np.asarray(position, float), np.asarray(look_at, float),
                                           roll_deg))

@@ -1,12 +1,15 @@
 """Segment one photo or a folder of photos into files (the library half of `wtinspect segment`).
 
-For each image ``REL`` (its path relative to the input folder, or its name), under ``OUT``:
+For each image ``REL`` (its path relative to the input folder, or its name) named ``NAME``
+(``REL`` without its suffix; ``REL`` itself where two photos would share a name, ``output_names``),
+under ``OUT``:
 
-- ``instances/REL.json``: that image's instances (COCO-compatible, uncompressed RLE, scores,
-  boxes), written when the image is done; ``--resume`` skips images whose four files exist;
-- ``background_removed/REL.png``: I_t, the photo with everything but the turbine black;
-- ``overlay/REL.png``: the photo with the instances drawn on it;
-- ``classes/REL.png``: the class map, each pixel's category id (0 background, 1 blade, 2 tower,
+- ``instances/NAME.json``: that image's instances (COCO-compatible, uncompressed RLE, scores,
+  boxes), the photo's SHA-256 and the settings, written when the image is done; ``--resume``
+  skips images whose four files exist and hold this very photo (other settings are refused);
+- ``background_removed/NAME.png``: I_t, the photo with everything but the turbine black;
+- ``overlay/NAME.png``: the photo with the instances drawn on it;
+- ``classes/NAME.png``: the class map, each pixel's category id (0 background, 1 blade, 2 tower,
   3 nacelle) from the instances scoring the threshold, one class a pixel
   (``Instances.class_map``), to compare with semantic labels;
 
@@ -14,7 +17,9 @@ and once the batch ends, ``instances.json`` (every finished image in one COCO fi
 ``contours`` and ``pitch``) and ``report.json`` (per file: ok / error, counts, what was found,
 outputs; and how many photos held a rotor, a single blade, a tower only or nothing).
 Every file is written atomically. A failing image is recorded and the batch goes on; a broken
-or looping symbolic link to an image is such a failure too, not skipped. Each run first removes
+or looping symbolic link to an image is such a failure too, not skipped. An output that cannot
+be written (a full disk, a read-only subfolder) stops the batch instead: every later image
+would fail the same way after the network ran. Each run first removes
 temporaries a kill left (``.NAME.XXXXXXXX``); ``--resume`` redoes an image whose instances file
 cannot be read; a run where no image succeeds removes an earlier ``instances.json`` rather than
 leave it beside a report that says ``instances: null``.
@@ -22,6 +27,8 @@ leave it beside a report that says ``instances: null``.
 
 from __future__ import annotations
 
+import hashlib
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -29,7 +36,7 @@ from typing import Any, Callable
 import cv2
 import numpy as np
 
-from wtcli.errors import InputError, WtError
+from wtcli.errors import ConfigError, InputError, OutputError, WtError
 from wtcli.jsonio import atomic_write_bytes, document, os_reason, write_json
 from wtcli.outputs import remove_stale, remove_temp_files
 from wtcli.masks import (LABELS, Instances, check_declared_size, instances_document, read_instances,
@@ -40,6 +47,10 @@ IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff")
 REPORT_SCHEMA = "wtinspect.segment_report"
 MAX_DECODE_PIXELS = 1 << 30  # OpenCV's CV_IO_MAX_IMAGE_PIXELS default
 FOUND = ("rotor", "single_blade", "tower_only", "nothing")  # what a photo holds (found_in)
+SUBFOLDERS = ("instances", "background_removed", "overlay", "classes")
+# The settings that change what a photo's files hold: a --resume with other values is refused.
+RESUME_KEYS = ("score_threshold", "max_size", "zoom", "wide", "flip", "model", "mirror_model",
+               "refiner")
 
 
 def found_in(inst: Instances, score_threshold: float = DEFAULT_SCORE_THRESHOLD) -> str:
@@ -67,18 +78,29 @@ class ImageResult:
     width: int = 0
     height: int = 0
     instances: Instances | None = None
+    name: str = ""  # the outputs' NAME (output_names); "" -> rel without its suffix
+    sha256: str | None = None  # of the photo's bytes: --resume tells this photo from another
 
     def to_dict(self, out: Path) -> dict[str, Any]:
         d = {"file": self.rel, "source": self.source, "status": self.status, "error": self.error,
              "counts": self.counts, "width": self.width, "height": self.height}
         if self.status != "error":
             d["found"] = self.found
-            d["outputs"] = {k: str(v) for k, v in output_paths(out, self.rel).items()}
+            d["outputs"] = {k: str(v) for k, v in output_paths(out, self.rel, self.name).items()}
         return d
 
 
-def find_images(path: Path, recursive: bool = False) -> tuple[Path, list[Path]]:
-    """(root, images): a single image -> (its folder, [it]); a folder -> its jpg/png/tif files."""
+@dataclass
+class Batch:
+    results: list[ImageResult]
+    stopped: OutputError | None = None  # an output could not be written: the batch ended there
+
+
+def find_images(path: Path, recursive: bool = False, out: Path | None = None
+                ) -> tuple[Path, list[Path]]:
+    """(root, images): a single image -> (its folder, [it]); a folder -> its jpg/png/tif files.
+    With ``recursive``, subfolders too, except hidden ones, ``out`` and any other segment output
+    folder (``is_output_folder``): a second run would take its overlays for photos."""
     try:
         path.stat()
     except FileNotFoundError:
@@ -93,7 +115,7 @@ def find_images(path: Path, recursive: bool = False) -> tuple[Path, list[Path]]:
     if not path.is_dir():
         raise InputError(f"{path}: not a file or folder")
     try:
-        it = list(path.rglob("*") if recursive else path.iterdir())
+        it = _walk(path, out) if recursive else list(path.iterdir())
         # A link whose target is missing or loops is kept, so it fails visibly in the report.
         files = sorted(p for p in it if (p.is_file() or (p.is_symlink() and not p.exists()))
                        and p.suffix.lower() in IMAGE_SUFFIXES
@@ -106,8 +128,47 @@ def find_images(path: Path, recursive: bool = False) -> tuple[Path, list[Path]]:
     return path, files
 
 
-def output_paths(out: Path, rel: str) -> dict[str, Path]:
-    stem = str(Path(rel).with_suffix(""))
+def is_output_folder(folder: Path) -> bool:
+    """A folder ``segment`` wrote into (its per-photo subfolders are there), finished or not."""
+    return all((folder / sub).is_dir() for sub in ("instances", "overlay", "background_removed"))
+
+
+def _walk(root: Path, out: Path | None) -> list[Path]:
+    """Every file under ``root``, not descending into hidden folders or output folders."""
+    skip = os.path.abspath(out) if out is not None else None
+    found: list[Path] = []
+
+    def fail(e: OSError) -> None:
+        raise e
+
+    for folder, dirs, names in os.walk(root, onerror=fail, followlinks=False):
+        here = Path(folder)
+        dirs[:] = [d for d in dirs if not d.startswith(".")
+                   and os.path.abspath(here / d) != skip and not is_output_folder(here / d)]
+        found += [here / n for n in names]
+    return found
+
+
+def output_names(rels: list[str]) -> dict[str, str]:
+    """Each photo's outputs' NAME: its path without the suffix, or with it where two photos
+    would share one (``dup.jpg`` and ``dup.png``; compared ignoring case, as disks on macOS and
+    Windows do), and a ``~2``, ``~3`` after names that differ only in case."""
+    stem = {r: str(Path(r).with_suffix("")) for r in rels}
+    groups: dict[str, list[str]] = {}
+    for r in rels:
+        groups.setdefault(stem[r].casefold(), []).append(r)
+    names = {r: (r if len(groups[stem[r].casefold()]) > 1 else stem[r]) for r in rels}
+    seen: dict[str, int] = {}
+    for r in sorted(rels):
+        key = names[r].casefold()
+        seen[key] = seen.get(key, 0) + 1
+        if seen[key] > 1:
+            names[r] = f"{names[r]}~{seen[key]}"
+    return names
+
+
+def output_paths(out: Path, rel: str, name: str = "") -> dict[str, Path]:
+    stem = name or str(Path(rel).with_suffix(""))
     return {"instances": out / "instances" / f"{stem}.json",
             "background_removed": out / "background_removed" / f"{stem}.png",
             "overlay": out / "overlay" / f"{stem}.png",
@@ -115,7 +176,8 @@ def output_paths(out: Path, rel: str) -> dict[str, Path]:
 
 
 def read_image(path: Path) -> np.ndarray:
-    """BGR uint8 [H, W, 3]; 16-bit and grey TIFFs are converted; anything else is InputError."""
+    """BGR uint8 [H, W, 3] as a viewer shows it (turned upright by its EXIF Orientation); 16-bit
+    and grey images are converted, alpha dropped; anything else is InputError."""
     try:
         data = np.fromfile(str(path), dtype=np.uint8)
     except FileNotFoundError:
@@ -125,7 +187,9 @@ def read_image(path: Path) -> np.ndarray:
         raise InputError(f"{path}: cannot read ({os_reason(e)})") from None
     check_declared_size(data, path)
     try:
-        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+        # As a viewer shows it: turned by its EXIF Orientation (IMREAD_UNCHANGED would not).
+        flags = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR
+        img = cv2.imdecode(data, flags) if data.size else None
     except cv2.error as e:  # OpenCV refuses to allocate a decompression bomb
         if "CV_IO_MAX_IMAGE_PIXELS" in str(e):
             raise InputError(f"{path}: image too large to decode (over {MAX_DECODE_PIXELS:,} pixels, "
@@ -158,26 +222,31 @@ def counts_of(inst: Instances) -> dict[str, int]:
 def segment_paths(path: Path, out: Path, segment: Callable[[np.ndarray], Instances],
                   recursive: bool = False, resume: bool = False,
                   on_progress: Callable[[ImageResult], None] | None = None,
-                  score_threshold: float = DEFAULT_SCORE_THRESHOLD) -> list[ImageResult]:
+                  score_threshold: float = DEFAULT_SCORE_THRESHOLD,
+                  settings: dict[str, Any] | None = None) -> Batch:
     """Run ``segment`` (BGR image -> Instances) over an image or folder, writing the files above;
-    ``score_threshold`` is the one ``segment`` kept instances at (for ``found_in``)."""
-    root, files = find_images(path, recursive)
+    ``score_threshold`` is the one ``segment`` kept instances at (for ``found_in``); ``settings``
+    go into each photo's instances file, and a ``resume`` over files made with other values of
+    ``RESUME_KEYS`` is refused (ConfigError)."""
+    root, files = find_images(path, recursive, out)
     remove_temp_files(out)
-    results: list[ImageResult] = []
-    for f in files:
-        rel = str(f.relative_to(root)) if path.is_dir() else f.name
-        outs = output_paths(out, rel)
-        res = ImageResult(rel=rel, source=str(f), status="ok")
+    rels = [str(f.relative_to(root)) if path.is_dir() else f.name for f in files]
+    names = output_names(rels)
+    batch = Batch([])
+    for f, rel in zip(files, rels):
+        outs = output_paths(out, rel, names[rel])
+        res = ImageResult(rel=rel, source=str(f), status="ok", name=names[rel])
         try:
-            done = _finished(outs) if resume else None
+            digest = _sha256(f)
+            done = _finished(outs, rel, digest, settings) if resume else None
             if done is not None:
                 img_rec, inst = done
-                res.status, res.instances = "skipped", inst
+                res.status, res.instances, res.sha256 = "skipped", inst, digest
                 res.width, res.height = int(img_rec["width"]), int(img_rec["height"])
             else:
                 img = read_image(f)
                 inst = segment(img)
-                res.instances = inst
+                res.instances, res.sha256 = inst, digest
                 res.height, res.width = img.shape[:2]
                 from wtcli.segment.infer import overlay, remove_background
 
@@ -186,9 +255,15 @@ def segment_paths(path: Path, out: Path, segment: Callable[[np.ndarray], Instanc
                 sure = inst[inst.scores >= score_threshold] if len(inst) else inst
                 atomic_write_bytes(outs["classes"], _png(sure.class_map()))
                 # The instances file last: its presence marks the image as done for --resume.
-                write_instances(outs["instances"], [_image_record(1, rel, f, res)], [inst])
+                write_instances(outs["instances"], [_image_record(1, rel, f, res)], [inst],
+                                extra={"settings": settings} if settings is not None else None)
             res.counts = counts_of(res.instances)
             res.found = found_in(res.instances, score_threshold)
+        except OutputError as e:  # the next image would fail the same way, after the network
+            res.status, res.error, res.instances = "error", str(e), None
+            batch.stopped = e
+        except ConfigError:
+            raise
         except WtError as e:
             res.status, res.error, res.instances = "error", _naming(str(e), f), None
         except OSError as e:
@@ -197,15 +272,32 @@ def segment_paths(path: Path, out: Path, segment: Callable[[np.ndarray], Instanc
         except (ValueError, cv2.error, MemoryError) as e:
             res.status, res.instances = "error", None
             res.error = _naming(f"{e.__class__.__name__}: {e}", f)
-        results.append(res)
+        batch.results.append(res)
         if on_progress:
             on_progress(res)
-    return results
+        if batch.stopped:
+            break
+    return batch
 
 
-def _finished(outs: dict[str, Path]) -> tuple[dict, Instances] | None:
-    """(image record, instances) of an image a previous run finished, or None: outputs missing,
-    or an instances file that cannot be read (damaged, edited) -- then the image is redone."""
+def _sha256(path: Path) -> str | None:
+    """The photo's SHA-256 (None where it cannot be read: read_image then says why)."""
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as fh:
+            for chunk in iter(lambda: fh.read(1 << 20), b""):
+                h.update(chunk)
+    except OSError:
+        return None
+    return h.hexdigest()
+
+
+def _finished(outs: dict[str, Path], rel: str, digest: str | None,
+              settings: dict[str, Any] | None) -> tuple[dict, Instances] | None:
+    """(image record, instances) of this photo as a previous run finished it, or None: outputs
+    missing, an instances file that cannot be read (damaged, edited), or one of another photo
+    (another name, or other bytes under this name) -- then the image is redone. Made with other
+    settings (``RESUME_KEYS``): ConfigError, as the batch would mix two segmentations."""
     if not all(p.is_file() for p in outs.values()):
         return None
     try:
@@ -214,6 +306,23 @@ def _finished(outs: dict[str, Path]) -> tuple[dict, Instances] | None:
         return None
     if len(items) != 1:
         return None
+    rec = items[0][0]
+    if rec.get("file_name") != rel or (rec.get("sha256") is not None and rec["sha256"] != digest):
+        return None
+    if settings is not None:
+        from wtcli.jsonio import read_json
+
+        try:
+            before = read_json(outs["instances"], header_required=False).get("settings")
+        except InputError:
+            return None
+        if isinstance(before, dict):  # files from before settings were recorded: taken as they are
+            for k in RESUME_KEYS:
+                if k in before and k in settings and before[k] != settings[k]:
+                    raise ConfigError(
+                        f"--resume: {outs['instances']} was made with {k} {before[k]!r}, this run "
+                        f"asks {settings[k]!r}; give the same settings, another --out, or run "
+                        "without --resume to redo every photo")
     return items[0]
 
 
@@ -223,7 +332,10 @@ def _naming(message: str, source: Path) -> str:
 
 
 def _image_record(iid: int, rel: str, src: Path, res: ImageResult) -> dict[str, Any]:
-    return {"id": iid, "file_name": rel, "path": str(src), "width": res.width, "height": res.height}
+    rec = {"id": iid, "file_name": rel, "path": str(src), "width": res.width, "height": res.height}
+    if res.sha256:
+        rec["sha256"] = res.sha256
+    return rec
 
 
 def write_batch_files(out: Path, results: list[ImageResult], settings: dict[str, Any]) -> dict[str, Any]:
@@ -248,5 +360,6 @@ def write_batch_files(out: Path, results: list[ImageResult], settings: dict[str,
     return report
 
 
-__all__ = ["FOUND", "IMAGE_SUFFIXES", "ImageResult", "found_in", "find_images", "output_paths",
-           "read_image", "segment_paths", "write_batch_files", "instances_document"]
+__all__ = ["FOUND", "IMAGE_SUFFIXES", "SUBFOLDERS", "Batch", "ImageResult", "found_in", "find_images",
+           "is_output_folder", "output_names", "output_paths", "read_image", "segment_paths",
+           "write_batch_files", "instances_document"]

@@ -49,6 +49,7 @@ ZOOM_MAX = 3  # the largest this many small turbines (each look costs a pass of 
 # or more are ones the first look, at 576 px, sees larger than its largest anchors
 # (``model.build_model``: 320 px, 554 px at 1:3) and can miss: a blade filling the frame.
 WIDE_SIZE = (320, 555)
+MAX_ASPECT = 100  # longer side / shorter side a photo may have: 5 px high at WIDE_SIZE's 555
 WIDE_BIG = 0.6
 WIDE_SAME = 0.5  # a first-look instance of the class with this mask IoU already is the big one
 WIDE_INSIDE = 0.5  # a first-look detection this much inside the big one is a piece of it
@@ -58,13 +59,18 @@ WIDE_COVERED = 0.8  # the first look has the big one when its sure detections of
 def working_image(image_bgr: np.ndarray, score_threshold: float, max_size: int | None
                   ) -> tuple[np.ndarray, int, int]:
     """The photo as the network takes it (BGR, longer side at most ``max_size``) and the
-    photo's own height and width; a bad threshold or a photo under 8 px is an InputError."""
+    photo's own height and width; a bad threshold, a photo under 8 px or one longer than
+    MAX_ASPECT times its width (a strip the network's smallest look would read 0 px high)
+    is an InputError."""
     img = as_bgr(image_bgr)
     if not 0.0 <= score_threshold <= 1.0:
         raise InputError(f"expected a score threshold in [0, 1], got {score_threshold}")
     H, W = img.shape[:2]
     if H < 8 or W < 8:
         raise InputError(f"image is too small ({W}x{H})")
+    if max(H, W) > MAX_ASPECT * min(H, W):
+        raise InputError(f"image is too narrow ({W}x{H}): at most {MAX_ASPECT}:1 (a drone "
+                         "panorama is under 10:1)")
     if max_size and max(H, W) > max_size:
         scale = max_size / max(H, W)
         img = cv2.resize(img, (max(1, round(W * scale)), max(1, round(H * scale))),
