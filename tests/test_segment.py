@@ -1125,3 +1125,25 @@ def test_a_photo_is_read_upright_as_its_exif_orientation_says(tmp_path):
     want = cv2.rotate(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR),
                       cv2.ROTATE_90_CLOCKWISE)
     assert np.abs(got.astype(int) - want.astype(int)).max() <= 1
+
+
+def test_an_interrupted_batch_sums_up_the_photos_done(cli, photo_folder, random_weights, tmp_path,
+                                                      monkeypatch):
+    def fake(img, net, score_threshold, *args, **kwargs):
+        fake.calls += 1
+        if fake.calls == 2:
+            raise KeyboardInterrupt  # Ctrl-C while the second photo is under way
+        h, w = img.shape[:2]
+        return Instances(np.array(["blade"], dtype=object), np.ones((1, h, w), bool), np.array([0.9]))
+    fake.calls = 0
+    monkeypatch.setattr(infer, "segment_image", fake)
+    out = tmp_path / "seg"
+    res = cli("segment", photo_folder, "--out", out, "--model", random_weights, "--no-refine")
+    assert res.exit_code == ExitCode.INTERRUPTED, res.stderr
+    assert "1/2 image(s) done before the interrupt" in res.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert report["interrupted"] is True and [r["file"] for r in report["images"]] == ["a.png"]
+    assert [img["file_name"] for img, _ in read_instances(out / "instances.json")] == ["a.png"]
+    res = cli("segment", photo_folder, "--out", out, "--model", random_weights, "--no-refine",
+              "--resume", "--json")
+    assert res.exit_code == 0 and json.loads(res.stdout)["interrupted"] is False

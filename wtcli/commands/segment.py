@@ -90,7 +90,11 @@ def segment(
                               on_progress=lambda res: advance(f"{res.rel} {res.status}"),
                               score_threshold=score_threshold, settings=settings)
     results = batch.results
-    report = write_batch_files(out, results, settings)
+    report = write_batch_files(out, results, settings, interrupted=batch.interrupted)
+    if batch.interrupted:  # Ctrl-C: the photos done are summed up, then exit 130
+        err_console.print(f"{len(results)}/{len(files)} image(s) done before the interrupt; "
+                          f"rerun with --resume to go on", soft_wrap=True)
+        raise KeyboardInterrupt
 
     found = report["n_found"]  # photos by what they hold: rotor, single blade, tower only, nothing
     table = Table(title=f"segment -> {out}/", title_justify="left", caption_justify="left",

@@ -94,6 +94,7 @@ class ImageResult:
 class Batch:
     results: list[ImageResult]
     stopped: OutputError | None = None  # an output could not be written: the batch ended there
+    interrupted: bool = False  # Ctrl-C: the photos done are in results, the one under way is not
 
 
 def find_images(path: Path, recursive: bool = False, out: Path | None = None
@@ -233,50 +234,53 @@ def segment_paths(path: Path, out: Path, segment: Callable[[np.ndarray], Instanc
     rels = [str(f.relative_to(root)) if path.is_dir() else f.name for f in files]
     names = output_names(rels)
     batch = Batch([])
-    for f, rel in zip(files, rels):
-        outs = output_paths(out, rel, names[rel])
-        res = ImageResult(rel=rel, source=str(f), status="ok", name=names[rel])
-        try:
-            digest = _sha256(f)
-            done = _finished(outs, rel, digest, settings) if resume else None
-            if done is not None:
-                img_rec, inst = done
-                res.status, res.instances, res.sha256 = "skipped", inst, digest
-                res.width, res.height = int(img_rec["width"]), int(img_rec["height"])
-            else:
-                img = read_image(f)
-                inst = segment(img)
-                res.instances, res.sha256 = inst, digest
-                res.height, res.width = img.shape[:2]
-                from wtcli.segment.infer import overlay, remove_background
+    try:
+        for f, rel in zip(files, rels):
+            outs = output_paths(out, rel, names[rel])
+            res = ImageResult(rel=rel, source=str(f), status="ok", name=names[rel])
+            try:
+                digest = _sha256(f)
+                done = _finished(outs, rel, digest, settings) if resume else None
+                if done is not None:
+                    img_rec, inst = done
+                    res.status, res.instances, res.sha256 = "skipped", inst, digest
+                    res.width, res.height = int(img_rec["width"]), int(img_rec["height"])
+                else:
+                    img = read_image(f)
+                    inst = segment(img)
+                    res.instances, res.sha256 = inst, digest
+                    res.height, res.width = img.shape[:2]
+                    from wtcli.segment.infer import overlay, remove_background
 
-                atomic_write_bytes(outs["background_removed"], _png(remove_background(img, inst)))
-                atomic_write_bytes(outs["overlay"], _png(overlay(img, inst)))
-                sure = inst[inst.scores >= score_threshold] if len(inst) else inst
-                atomic_write_bytes(outs["classes"], _png(sure.class_map()))
-                # The instances file last: its presence marks the image as done for --resume.
-                write_instances(outs["instances"], [_image_record(1, rel, f, res)], [inst],
-                                extra={"settings": settings} if settings is not None else None)
-            res.counts = counts_of(res.instances)
-            res.found = found_in(res.instances, score_threshold)
-        except OutputError as e:  # the next image would fail the same way, after the network
-            res.status, res.error, res.instances = "error", str(e), None
-            batch.stopped = e
-        except ConfigError:
-            raise
-        except WtError as e:
-            res.status, res.error, res.instances = "error", _naming(str(e), f), None
-        except OSError as e:
-            res.status, res.instances = "error", None
-            res.error = f"{e.filename or f}: {os_reason(e)}"
-        except (ValueError, cv2.error, MemoryError) as e:
-            res.status, res.instances = "error", None
-            res.error = _naming(f"{e.__class__.__name__}: {e}", f)
-        batch.results.append(res)
-        if on_progress:
-            on_progress(res)
-        if batch.stopped:
-            break
+                    atomic_write_bytes(outs["background_removed"], _png(remove_background(img, inst)))
+                    atomic_write_bytes(outs["overlay"], _png(overlay(img, inst)))
+                    sure = inst[inst.scores >= score_threshold] if len(inst) else inst
+                    atomic_write_bytes(outs["classes"], _png(sure.class_map()))
+                    # The instances file last: its presence marks the image as done for --resume.
+                    write_instances(outs["instances"], [_image_record(1, rel, f, res)], [inst],
+                                    extra={"settings": settings} if settings is not None else None)
+                res.counts = counts_of(res.instances)
+                res.found = found_in(res.instances, score_threshold)
+            except OutputError as e:  # the next image would fail the same way, after the network
+                res.status, res.error, res.instances = "error", str(e), None
+                batch.stopped = e
+            except ConfigError:
+                raise
+            except WtError as e:
+                res.status, res.error, res.instances = "error", _naming(str(e), f), None
+            except OSError as e:
+                res.status, res.instances = "error", None
+                res.error = f"{e.filename or f}: {os_reason(e)}"
+            except (ValueError, cv2.error, MemoryError) as e:
+                res.status, res.instances = "error", None
+                res.error = _naming(f"{e.__class__.__name__}: {e}", f)
+            batch.results.append(res)
+            if on_progress:
+                on_progress(res)
+            if batch.stopped:
+                break
+    except KeyboardInterrupt:  # the files of the photos done are kept; the caller sums them up
+        batch.interrupted = True
     return batch
 
 
@@ -338,8 +342,10 @@ def _image_record(iid: int, rel: str, src: Path, res: ImageResult) -> dict[str, 
     return rec
 
 
-def write_batch_files(out: Path, results: list[ImageResult], settings: dict[str, Any]) -> dict[str, Any]:
-    """The combined instances.json (finished images) and report.json; returns the report."""
+def write_batch_files(out: Path, results: list[ImageResult], settings: dict[str, Any],
+                      interrupted: bool = False) -> dict[str, Any]:
+    """The combined instances.json (finished images) and report.json; returns the report.
+    ``interrupted``: the batch was stopped (Ctrl-C) before its last photos, which it leaves out."""
     done = [r for r in results if r.instances is not None]
     images = [_image_record(k + 1, r.rel, Path(r.source), r) for k, r in enumerate(done)]
     if done:
@@ -355,6 +361,7 @@ def write_batch_files(out: Path, results: list[ImageResult], settings: dict[str,
         # Added within schema_version 1 (an optional field; readers of older reports ignore it).
         "n_found": {k: sum(r.found == k for r in results if r.status != "error") for k in FOUND},
         "instances": str(out / "instances.json") if done else None,
+        "interrupted": interrupted,  # added within schema_version 1, as n_found
     })
     write_json(out / "report.json", report)
     return report
