@@ -85,3 +85,11 @@ def test_help_into_a_closed_pipe_exits_0_quietly():
 def test_a_usage_error_keeps_exit_2_when_stdout_is_a_closed_pipe():
     done = _run_into_closed_pipe("no-such-command")  # the error goes to stderr, still open
     assert done.returncode == 2 and "no-such-command" in done.stderr
+
+
+def test_ctrl_c_says_interrupted_without_markup_tags(runner):
+    def interrupt():
+        raise KeyboardInterrupt
+
+    r = runner.invoke(_app_with(interrupt), ["go"])
+    assert r.exit_code == 130 and r.stderr == "interrupted\n" and r.stdout == ""

@@ -753,6 +753,7 @@ def test_overlay_finds_the_photo_segment_read(cli, tmp_path, monkeypatch):
     photos) draws its overlay on the photo at the ``path`` segment recorded."""
     from wtcli.pitch.inputs import load_pitch_input
     from wtcli.pitch.overlay import overlay_background
+    from wtcli.segment.batch import read_image
 
     monkeypatch.chdir(tmp_path)
     (tmp_path / "photos").mkdir()
@@ -763,8 +764,152 @@ def test_overlay_finds_the_photo_segment_read(cli, tmp_path, monkeypatch):
     write_instances(tmp_path / "seg" / "instances.json", [img], [rotor(120, 160, [90, 210, 330])])
     assert cli("contours", "seg/instances.json", "--out", "contours.json").exit_code == 0
     (inp,) = load_pitch_input(["contours.json"])
-    bg, note = overlay_background(inp, None)
+    bg, note = overlay_background(inp, None, read_image)
     assert note == "" and bg is not None and bg.shape == photo.shape and (bg == 200).all()
     assert cli("pitch", "contours.json", "--overlay-dir", "ov").exit_code == 0
     drawn = cv2.imread("ov/a_pitch.png")
     assert (drawn == 200).all(axis=2).mean() > 0.3  # the photo's grey; the canvas has none
+
+
+# ---- overlay names, overlay background, photos the segmenter refuses ------------------------------
+def test_overlay_names_are_one_file_per_image():
+    """Folders kept, the extension where names would meet (without case, as on macOS/Windows),
+    ~2 after names still alike (as segment's outputs); nothing outside --overlay-dir."""
+    from wtcli.pitch import overlay_names
+
+    names = overlay_names([{"file_name": f} for f in (
+        "site1/IMG_0001.JPG", "site2/IMG_0001.JPG", "dup.jpg", "dup.png", "A.jpg", "a.png",
+        "x.jpg", "x.jpg", "../up.jpg", "/abs/q.jpg", "one.jpg", "dup.jpg.png", "b.jpg",
+        "B.JPG")] + [{"id": 7}])
+    assert names == [
+        "site1/IMG_0001_pitch.png", "site2/IMG_0001_pitch.png", "dup.jpg_pitch.png",
+        "dup.png_pitch.png", "A.jpg_pitch.png", "a.png_pitch.png", "x.jpg_pitch.png",
+        "x.jpg~2_pitch.png", "up_pitch.png", "q_pitch.png", "one_pitch.png",
+        "dup.jpg.png_pitch.png", "b.jpg~2_pitch.png", "B.JPG_pitch.png", "image7_pitch.png"]
+    assert len({n.casefold() for n in names}) == len(names)
+    # Decided from the whole set: the same names in another order get the same files.
+    recs = [{"file_name": f} for f in ("dup.png", "Site/a.jpg", "dup.jpg", "site/A.tif",
+                                        "c.jpg", "C.jpg")]
+    assert overlay_names(recs[::-1]) == overlay_names(recs)[::-1]
+    assert overlay_names(recs)[1] == "Site/a.jpg_pitch.png"
+
+
+def test_cli_overlays_of_photos_with_one_name_do_not_overwrite_each_other(cli, tmp_path):
+    """A ``segment -r`` batch of site1/IMG_0001.JPG and site2/IMG_0001.JPG, and dup.jpg beside
+    dup.png: four overlays, each drawn on its own photo."""
+    names = ["site1/IMG_0001.JPG", "site2/IMG_0001.JPG", "dup.jpg", "dup.png"]
+    h, w = 240, 320
+    for k, name in enumerate(names):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        # PNG bytes under every name (read_image goes by the bytes): each grey comes back exact.
+        _, png = cv2.imencode(".png", np.full((h, w, 3), 40 + 40 * k, np.uint8))
+        (tmp_path / name).write_bytes(png.tobytes())
+    images = [{"id": k + 1, "file_name": n, "width": w, "height": h} for k, n in enumerate(names)]
+    write_instances(tmp_path / "instances.json", images,
+                    [rotor(h, w, [10, 130, 250], 12, length=100)] * len(names))
+    r = cli("pitch", tmp_path / "instances.json", "--overlay-dir", tmp_path / "ov", "--json")
+    assert r.exit_code == 0, r.stderr
+    overlays = [i["overlay"] for i in json.loads(r.stdout)["images"]]
+    ov = tmp_path / "ov"
+    assert overlays == [str(ov / "site1" / "IMG_0001_pitch.png"),
+                        str(ov / "site2" / "IMG_0001_pitch.png"),
+                        str(ov / "dup.jpg_pitch.png"), str(ov / "dup.png_pitch.png")]
+    for k, path in enumerate(overlays):
+        grey = 40 + 40 * k
+        assert (cv2.imread(path) == grey).all(axis=2).mean() > 0.5, path  # its own photo
+
+
+def test_overlay_background_is_read_as_segment_reads_it(cli, tmp_path):
+    """The overlay's photo comes from ``read_image``, as segment's masks did: 16-bit scaled as
+    there (65280 is 254 there, 255 through cv2.imread's own conversion), from a candidate and
+    from --image; an unreadable --image names the file, an unreadable candidate is a note."""
+    from wtcli.pitch.inputs import load_pitch_input
+    from wtcli.pitch.overlay import overlay_background
+    from wtcli.segment.batch import read_image
+
+    h, w = 120, 160
+    cv2.imwrite(str(tmp_path / "a.png"), np.full((h, w, 3), 65280, np.uint16))
+    write_instances(tmp_path / "instances.json", [{"id": 1, "file_name": "a.png", "width": w,
+                                                   "height": h}], [rotor(h, w, [90, 210, 330])])
+    (inp,) = load_pitch_input([tmp_path / "instances.json"])
+    want = read_image(tmp_path / "a.png")
+    for explicit in (None, tmp_path / "a.png"):
+        bg, note = overlay_background(inp, explicit, read_image)
+        assert note == "" and bg.dtype == np.uint8 and np.array_equal(bg, want)
+    r = cli("pitch", tmp_path / "instances.json", "--overlay-dir", tmp_path / "ov")
+    assert r.exit_code == 0, r.stderr
+    assert (cv2.imread(str(tmp_path / "ov" / "a_pitch.png")) == 254).all(axis=2).mean() > 0.3
+    (tmp_path / "bad.png").write_bytes(b"\x89PNG not really")
+    with pytest.raises(InputError, match=r"bad\.png: not a readable image"):
+        overlay_background(inp, tmp_path / "bad.png", read_image)
+    (tmp_path / "a.png").write_bytes(b"\x89PNG not really")
+    bg, note = overlay_background(inp, None, read_image)
+    assert bg is None and note.endswith("a.png: unreadable or not 160x120; overlay drawn on the "
+                                        "masks")
+
+
+def _segmenter_checks_only(monkeypatch):
+    """The torch segmenter stood in for by its own size checks (post.working_image), which
+    refuse a photo before the network runs; what it would find is a rotor."""
+    from wtcli.segment import infer, post
+
+    def segment_image(image, **kw):
+        post.working_image(image, 0.5, None)
+        return rotor(*image.shape[:2], [90, 210, 330])
+
+    monkeypatch.setattr(infer, "segment_image", segment_image)
+
+
+@pytest.mark.parametrize("size, why", [((1, 1), "image is too small (1x1)"),
+                                       ((9, 2000), "image is too narrow (2000x9)")])
+def test_a_photo_the_segmenter_refuses_is_named_and_exit_3(cli, tmp_path, monkeypatch, size, why):
+    """As ``segment`` says it: the file named once, exit 3 (not "no mask pixels", exit 5, nor a
+    cv2.error, exit 1), through ``photo_to_pitch`` and the command."""
+    from wtcli.chain import photo_to_pitch
+
+    _segmenter_checks_only(monkeypatch)
+    for name in ("tiny.jpg", "tiny.png"):  # a colour PNG is a photo too
+        photo = tmp_path / name
+        cv2.imwrite(str(photo), np.full(size + (3,), (30, 90, 200), np.uint8))
+        with pytest.raises(InputError) as e:
+            photo_to_pitch(photo)
+        assert str(e.value).startswith(f"{photo}: {why}") and str(e.value).count(str(photo)) == 1
+        one_line_error(cli("pitch", photo), 3, f"{photo}: {why}")
+
+
+def test_a_broken_link_to_a_photo_says_so(cli, tmp_path, monkeypatch):
+    from wtcli.chain import photo_to_pitch
+
+    _segmenter_checks_only(monkeypatch)
+    (tmp_path / "gone.jpg").symlink_to(tmp_path / "missing.jpg")
+    with pytest.raises(InputError, match="gone.jpg: broken symbolic link"):
+        photo_to_pitch(tmp_path / "gone.jpg")
+    one_line_error(cli("pitch", tmp_path / "gone.jpg"), 3, "gone.jpg: broken symbolic link")
+
+
+def test_pitch_notes_are_one_line_in_a_log(cli, tmp_path):
+    """stderr not a terminal (a log): a note longer than the console's 80 columns stays one line."""
+    deep = tmp_path / ("a_long_folder_name_" * 8)
+    deep.mkdir()
+    inst = write_rotor_instances(deep / "instances.json", [[10, 130, 250]])
+    cv2.imwrite(str(deep / "r0.png"), np.zeros((10, 10, 3), np.uint8))  # not the masks' size
+    r = cli("pitch", inst, "--overlay-dir", deep / "ov")
+    assert r.exit_code == 0, r.stderr
+    notes = [line for line in r.stderr.splitlines() if line.startswith("note:")]
+    assert len(notes) == 1 and notes[0].endswith("not 320x240; overlay drawn on the masks")
+    summary = [line for line in r.stderr.splitlines() if line.startswith("pitch of")]
+    assert summary == [f"pitch of 1/1 image(s) -> {deep / 'ov'}"]
+
+
+def test_overlay_of_a_thin_strip_draws(tmp_path):
+    """The overlay resizes nothing: a 9 x 2000 or 1 x 300 image draws at its own size."""
+    for h, w in ((9, 2000), (2000, 9), (1, 300)):
+        m = np.zeros((h, w), bool)
+        if h < w:
+            m[max(0, h // 2 - 1):h // 2 + 2, 5:w - 5] = True
+        else:
+            m[5:h - 5, w // 2 - 1:w // 2 + 2] = True
+        res = measure_pitch(find_contours(Instances(np.array(["blade"], object), m[None]), 0),
+                            None)
+        for bg in (None, np.full((h, w, 3), 100, np.uint8)):
+            assert draw_pitch_overlay(bg, res).shape == (h, w, 3)

@@ -1551,3 +1551,64 @@ def test_unit_order_is_the_shortest_of_every_order_and_direction():
             got = _unit_order(cost, first)
             assert sorted(i for i, _ in got) == list(range(n))
             assert total(got) == pytest.approx(best)
+
+
+def _plan_segmenter_checks_only(monkeypatch, inst=None):
+    """The torch segmenter stood in for by its own size checks (post.working_image), then
+    ``inst``: a photo it refuses is refused before any network runs."""
+    from wtcli.segment import infer, post
+
+    def segment_image(image, **kw):
+        post.working_image(image, 0.5, None)
+        return inst
+
+    monkeypatch.setattr(infer, "segment_image", segment_image)
+
+
+@pytest.mark.parametrize("size, why", [((1, 1), "image is too small (1x1)"),
+                                       ((9, 2000), "image is too narrow (2000x9)")])
+def test_cli_plan_names_a_photo_the_segmenter_refuses(cli, tmp_path, monkeypatch, size, why):
+    import cv2
+
+    _plan_segmenter_checks_only(monkeypatch)
+    photo = tmp_path / "tiny.jpg"
+    cv2.imwrite(str(photo), np.full(size + (3,), (30, 90, 200), np.uint8))
+    r = cli("plan", SAMPLE, f"T1={photo}")
+    assert r.exit_code == 3, r.output
+    assert r.stderr == f"error: {photo}: {why}" + r.stderr.split(why, 1)[1]
+    assert r.stderr.count("\n") == 1 and r.stderr.count(str(photo)) == 1
+
+
+def test_cli_plan_lines_on_stderr_are_one_line_in_a_log(cli, tmp_path, monkeypatch):
+    """stderr not a terminal (a log): "T2: blade azimuths ... from PHOTO" and "plan -> OUT"
+    stay one line each however long the path (the console's 80 columns would wrap them)."""
+    import cv2
+
+    from wtcli.geometry.projection import instance_masks
+    from wtcli.masks import Instances
+
+    t = load_mission(SAMPLE).turbine("T2")
+    inst = instance_masks(t, default_photo_camera(t, Camera(800, 600, 16, 23.2)))
+    _plan_segmenter_checks_only(monkeypatch, Instances(np.array([i[0] for i in inst], dtype=object),
+                                                       np.array([i[2] for i in inst])))
+    deep = tmp_path / ("a_long_folder_name_" * 6)
+    deep.mkdir()
+    photo = deep / "t2.png"
+    cv2.imwrite(str(photo), np.full((600, 800, 3), 200, np.uint8))
+    r = cli("plan", SAMPLE, f"T2={photo}", "--out", deep / "plan.json")
+    assert r.exit_code == 0, r.output
+    lines = r.stderr.splitlines()
+    assert any(line.startswith("T2: blade azimuths ") and f"from {photo}" in line
+               for line in lines), lines
+    assert f"plan -> {deep / 'plan.json'}" in lines
+
+
+def test_cli_plan_says_a_dangling_photo_link_is_one(cli, tmp_path):
+    (tmp_path / "gone.jpg").symlink_to(tmp_path / "missing.jpg")
+    r = cli("plan", SAMPLE, f"T1={tmp_path / 'gone.jpg'}")
+    assert r.exit_code == 3 and "gone.jpg: broken symbolic link" in r.stderr
+    (tmp_path / "gone.json").symlink_to(tmp_path / "missing.json")  # a pitch JSON, and contours
+    r = cli("plan", SAMPLE, f"T1={tmp_path / 'gone.json'}")
+    assert r.exit_code == 3 and "gone.json: broken symbolic link" in r.stderr
+    r = cli("contours", tmp_path / "gone.json")
+    assert r.exit_code == 3 and "gone.json: broken symbolic link" in r.stderr

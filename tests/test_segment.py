@@ -405,6 +405,18 @@ def test_pitch_on_a_photo_segments_it_first(cli, tmp_path, random_weights, monke
     assert "unexpected" not in res.stderr and "segment` on it first" not in res.stderr
 
 
+def test_pitch_on_photos_records_an_unreadable_one_and_goes_on(cli, tmp_path, random_weights,
+                                                               monkeypatch):
+    monkeypatch.setenv("WTINSPECT_MODEL", str(random_weights))
+    cv2.imwrite(str(tmp_path / "photo.jpg"), _image())
+    (tmp_path / "bad.jpg").write_text("not a photo")
+    res = cli("pitch", tmp_path / "photo.jpg", tmp_path / "bad.jpg", "--out", tmp_path / "p.json")
+    assert res.exit_code == ExitCode.PARTIAL, res.stderr
+    images = json.loads((tmp_path / "p.json").read_text())["images"]
+    assert [im["image"]["file_name"] for im in images] == ["photo.jpg", "bad.jpg"]
+    assert "bad.jpg: not a readable image" in images[1]["error"]
+
+
 def _bar(h: int, w: int, angle: float, width: float, length: float) -> np.ndarray:
     m = np.zeros((h, w), np.uint8)
     pts = cv2.boxPoints(((w / 2 + 13.3, h / 2 - 7.7), (length, width), angle))

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Callable
 
 from wtcli.contours import find_contours, require_contours
-from wtcli.errors import PerceptionError
+from wtcli.errors import InputError, PerceptionError
 from wtcli.masks import Instances
 from wtcli.pitch.inputs import PitchBatch, PitchInput, area_threshold_px
 from wtcli.pitch.measure import measure_pitch
@@ -61,11 +61,16 @@ def photo_input(path: str | Path, area_threshold: float | None = None,
 
     path = Path(path)
     thr = area_threshold_px(area_threshold)
-    img = read_image(path)
+    try:
+        img = read_image(path)
+        inst = segment_image(img, score_threshold=DEFAULT_SCORE_THRESHOLD,
+                             candidate_floor=candidate_floor, flip=not fast, zoom=not fast,
+                             wide=False)
+    except InputError as e:
+        # The segmenter's own checks ("image is too small (1x1)") see pixels, not the file.
+        raise e if str(path) in str(e) else type(e)(f"{path}: {e}") from None
     rec = {"id": 1, "file_name": path.name, "path": str(path), "width": int(img.shape[1]),
            "height": int(img.shape[0])}
-    inst = segment_image(img, score_threshold=DEFAULT_SCORE_THRESHOLD,
-                         candidate_floor=candidate_floor, flip=not fast, zoom=not fast, wide=False)
     try:
         cs = require_contours(find_contours(inst, thr, image=rec, source=str(path)))
         return PitchInput(cs, None, rec, (path,), DEFAULT_SCORE_THRESHOLD), inst
@@ -116,12 +121,19 @@ def pitch_photos(paths: list[Path], expected_blades: int | None = 3, source: str
     area_threshold_px(area_threshold)  # a bad threshold is refused before any photo is segmented
     results, errors, inputs = [], [], []
     for k, path in enumerate(paths):
-        pp = photo_to_pitch(path, expected_blades, area_threshold=area_threshold,
-                            score_threshold=score_threshold, candidate_floor=candidate_floor)
-        results.append(pp.result)
-        errors.append(pp.error)
-        inputs.append(pp.input)
+        try:
+            pp = photo_to_pitch(path, expected_blades, area_threshold=area_threshold,
+                                score_threshold=score_threshold, candidate_floor=candidate_floor)
+            result, error, inp = pp.result, pp.error, pp.input
+        except InputError as e:  # an unreadable photo is one failed item, the batch goes on
+            if len(paths) == 1:
+                raise
+            rec = {"id": 1, "file_name": Path(path).name, "path": str(path), "width": 0, "height": 0}
+            result, error, inp = None, str(e), PitchInput(None, str(e), rec, ())
+        results.append(result)
+        errors.append(error)
+        inputs.append(inp)
         if on_done is not None:
-            on_done(k, pp.error)
+            on_done(k, error)
     return PitchBatch(tuple(results), tuple(errors), tuple(inputs), source, expected_blades,
                       score_threshold, candidate_floor)

@@ -74,7 +74,8 @@ class _Boundary(TyperGroup):
         except (typer.Exit, typer.Abort, typer.TyperException):
             raise
         except KeyboardInterrupt:
-            err_console.print("[red]interrupted[/red]")
+            # The console has markup off (console.py): a coloured line asks for it.
+            err_console.print("[red]interrupted[/red]", markup=True, soft_wrap=True)
             ctx.exit(ExitCode.INTERRUPTED)
         except WtError as e:
             if _debug(ctx):

@@ -260,7 +260,9 @@ def read_mask_image(path: str | Path) -> np.ndarray:
     """A mask file as a 2-D integer array; InputError if unreadable or a colour photo."""
     path = Path(path)
     if not path.exists():
-        raise InputError(f"{path}: file not found")
+        from wtcli.jsonio import missing
+
+        raise InputError(f"{path}: {missing(path)}")
     data = np.fromfile(str(path), np.uint8) if path.is_file() else np.zeros(0, np.uint8)
     check_declared_size(data, path)
     img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None

@@ -49,6 +49,11 @@ def os_reason(e: OSError) -> str:
     return errno.errorcode.get(e.errno or 0, e.__class__.__name__)
 
 
+def missing(path: str | Path) -> str:
+    """Why an input is not there: a link to nothing says so, as the user would want to know."""
+    return "broken symbolic link" if Path(path).is_symlink() else "file not found"
+
+
 def write_failed(path: str | Path, e: OSError) -> OutputError:
     """The one message for an output that could not be written (exit 3, docs/exit-codes.md)."""
     return OutputError(f"{path}: cannot write ({os_reason(e)})")
@@ -153,7 +158,7 @@ def read_capped(path: str | Path, max_bytes: int, kind: str) -> str:
         with open(path, "rb") as f:
             data = f.read(max_bytes + 1)
     except FileNotFoundError:
-        raise InputError(f"{path}: file not found") from None
+        raise InputError(f"{path}: {missing(path)}") from None
     except IsADirectoryError:
         raise InputError(f"{path}: is a folder, expected a {kind} file") from None
     except OSError as e:

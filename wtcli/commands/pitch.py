@@ -12,13 +12,9 @@ from wtcli.console import err_console, make_progress
 from wtcli.errors import InputError, PartialFailure, PerceptionError
 from wtcli.jsonio import atomic_write_bytes, dumps, write_json
 from wtcli.pitch.inputs import is_photo, load_pitch_input, pitch_batch
-from wtcli.pitch.overlay import HUB_NOTE, draw_pitch_overlay, overlay_background
+from wtcli.pitch.overlay import HUB_NOTE, draw_pitch_overlay, overlay_background, overlay_names
+from wtcli.segment.batch import read_image
 from wtcli.segment.defaults import CANDIDATE_FLOOR
-
-
-def _overlay_name(img: dict, k: int) -> str:
-    stem = Path(str(img.get("file_name") or f"image{img.get('id', k)}")).stem
-    return f"{stem}_pitch.png"
 
 
 def register(app: typer.Typer) -> None:
@@ -93,15 +89,17 @@ def register(app: typer.Typer) -> None:
         overlays: list[Optional[str]] | None = None
         if overlay_dir is not None:
             overlays = []
+            # From every record, failed ones too: a name must not change with what else failed.
+            names = overlay_names([inp.image for inp in batch.inputs])
             for k, (res, inp) in enumerate(zip(batch.results, batch.inputs)):
                 if res is None:
                     overlays.append(None)
                     continue
-                bg, note = overlay_background(inp, image)
+                bg, note = overlay_background(inp, image, read_image)  # as segment read it
                 if note:
-                    err_console.print(f"note: {note}")
+                    err_console.print(f"note: {note}", soft_wrap=True)
                 ok, png = cv2.imencode(".png", draw_pitch_overlay(bg, res))
-                path = overlay_dir / _overlay_name(inp.image, k)
+                path = overlay_dir / names[k]
                 atomic_write_bytes(path, png.tobytes())
                 overlays.append(str(path))
         doc = batch.to_document(overlays)
@@ -129,7 +127,7 @@ def register(app: typer.Typer) -> None:
             unknown = sum(r is not None and not r.direction_known for r in batch.results)
             err_console.print(f"pitch of {n - bad}/{n} image(s) -> {where}"
                               + (f" ({unknown} with the hub out of frame: blade direction "
-                                 "unknown)" if unknown else ""))
+                                 "unknown)" if unknown else ""), soft_wrap=True)
         if bad:
             if n == 1:
                 raise PerceptionError(batch.errors[0])

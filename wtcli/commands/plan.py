@@ -101,7 +101,8 @@ def register(app: typer.Typer) -> None:
             azimuths, sources = blade_azimuths(mission, list(inputs or []), _pose(camera_pose), fast=fast)
             for tid, src in sources.items():
                 err_console.print(f"{tid}: blade azimuths "
-                                  f"{', '.join(f'{a:.1f}' for a in azimuths[tid])} deg from {src}")
+                                  f"{', '.join(f'{a:.1f}' for a in azimuths[tid])} deg from {src}",
+                                  soft_wrap=True)
             with stage_bars(PLAN_STAGE_TEXT) as progress:
                 result = plan_mission(mission, azimuths=azimuths or None, pattern=pattern, workers=jobs,
                                       progress=progress)
@@ -112,14 +113,15 @@ def register(app: typer.Typer) -> None:
                 files = export_all(result, export_dir, stem=(out.stem if out else "mission"),
                                    cruise=fl.cruise_speed_m_s, hover=fl.inspection_speed_m_s,
                                    dji=dji_kmz)
-                err_console.print(f"exports: {len(files)} file(s) -> {export_dir}")
+                err_console.print(f"exports: {len(files)} file(s) -> {export_dir}", soft_wrap=True)
             if picture is not None:
                 ok, png = cv2.imencode(".png", draw_plan(result))
                 atomic_write_bytes(picture, png.tobytes())
             s = result.summary
             if s.get("notes"):
                 err_console.print(f"note: {len(s['notes'])} adaptation(s) near the hub, nacelle or tower "
-                                  "(oblique passes, dropped stations): see summary.notes in the plan")
+                                  "(oblique passes, dropped stations): see summary.notes in the plan",
+                                  soft_wrap=True)
             if json_out:
                 typer.echo(dumps(document(PLAN_SCHEMA, PLAN_VERSION, result.to_dict())))
                 return
@@ -140,4 +142,4 @@ def register(app: typer.Typer) -> None:
             if any(v.values()):
                 typer.echo(f"UNSAFE against the real turbines: {v} - {s['first_violation']}")
             if out is not None:
-                err_console.print(f"plan -> {out}")
+                err_console.print(f"plan -> {out}", soft_wrap=True)

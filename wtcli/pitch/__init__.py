@@ -18,7 +18,7 @@ from wtcli.pitch.inputs import (PHOTO_SUFFIXES, PitchBatch, PitchInput, area_thr
 from wtcli.pitch.measure import (DEFAULT_ROTOR_BLADES, STUB_ELONGATION, check_blade_count,
                                  measure_pitch, pitch_from_instances)
 from wtcli.pitch.overlay import (CLASS_COLORS_BGR, draw_pitch_overlay, mask_canvas,
-                                 overlay_background)
+                                 overlay_background, overlay_names)
 from wtcli.pitch.result import (PITCH_SCHEMA, PITCH_VERSION, THETA_SOURCE, BladePitch,
                                 PitchResult, read_pitch)
 from wtcli.pitch.rotor import (CANDIDATE_INSIDE, CLOSE_UP_LENGTH, ROTOR_GAP_TOLERANCE_DEG,
@@ -33,7 +33,7 @@ __all__ = [
     "PitchInput", "PitchResult", "admit_low_score_blades", "angle_diff", "area_threshold_px",
     "axes_convergence", "check_blade_count", "classify_theta", "common_end", "draw_pitch_overlay",
     "image_angle", "is_photo", "load_pitch_input", "mask_canvas", "measure_pitch", "nacelle_hub",
-    "normalize_angle", "normalize_phi", "normalize_theta", "overlay_background",
+    "normalize_angle", "normalize_phi", "normalize_theta", "overlay_background", "overlay_names",
     "pitch_batch", "pitch_from_instances", "principal_axis", "read_pitch", "rect_eq7",
     "select_rotor", "wider_end",
 ]

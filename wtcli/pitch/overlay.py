@@ -5,7 +5,10 @@ and φ drawn on the photo or on the masks.
 from __future__ import annotations
 
 import math
-from pathlib import Path
+import re
+import unicodedata
+from pathlib import Path, PurePosixPath
+from typing import Callable
 
 import cv2
 import numpy as np
@@ -111,22 +114,94 @@ def draw_pitch_overlay(image_bgr: np.ndarray | None, result: PitchResult) -> np.
     return img
 
 
-def overlay_background(inp: PitchInput, explicit: Path | None) -> tuple[np.ndarray | None, str]:
+def overlay_background(inp: PitchInput, explicit: Path | None,
+                       read: Callable[[Path], np.ndarray]) -> tuple[np.ndarray | None, str]:
     """The photo to draw on: ``explicit`` (must load and match the masks' size) or the first
-    candidate that exists and matches; else None (black canvas). Returns (image, note)."""
+    candidate that exists and matches; else None (black canvas). Returns (image, note).
+
+    ``read``: path -> BGR uint8 [H, W, 3], InputError if it cannot. Give the reader segment
+    used (``wtcli.segment.batch.read_image``: EXIF orientation, 16-bit, grey, alpha), so the
+    masks lie on the pixels they were found on; it is passed in because pitch never imports
+    the segmenter's package (tests/test_layout.py)."""
     h, w = inp.contours.image_size if inp.contours is not None else (0, 0)
     if explicit is not None:
-        img = cv2.imread(str(explicit), cv2.IMREAD_COLOR)
-        if img is None:
-            raise InputError(f"{explicit}: cannot read the image for the overlay")
+        try:
+            img = read(explicit)
+        except InputError as e:
+            raise InputError(f"{e} (--image, the overlay's background)") from None
         if img.shape[:2] != (h, w):
             raise InputError(f"{explicit}: {img.shape[1]}x{img.shape[0]} does not match the "
                              f"masks ({w}x{h})")
         return img, ""
     for p in inp.background_candidates:
         if p.is_file():
-            img = cv2.imread(str(p), cv2.IMREAD_COLOR)
+            try:
+                img = read(p)
+            except InputError:
+                img = None
             if img is not None and img.shape[:2] == (h, w):
                 return img, ""
             return None, f"{p}: unreadable or not {w}x{h}; overlay drawn on the masks"
     return None, ""
+
+
+OVERLAY_SUFFIX = "_pitch.png"
+
+
+def _relative_parts(file_name: str) -> list[str]:
+    """An image's ``file_name`` as folders and name under --overlay-dir: both slashes split
+    (COCO files from Windows use backslashes), and nothing may climb out of the folder (``..``)
+    or start at its root: an absolute name keeps its name only."""
+    text = str(file_name)
+    parts = [p for p in re.split(r"[\\/]", text) if p not in ("", ".", "..")]
+    if text.startswith(("/", "\\")) or re.match(r"[A-Za-z]:", text):
+        parts = parts[-1:]
+    return parts
+
+
+def _fold(name: str) -> str:
+    # How a macOS or Windows disk compares names: without case (and NFC, as macOS stores them).
+    return unicodedata.normalize("NFC", name).casefold()
+
+
+def _clashing(names: list[str]) -> set[int]:
+    seen: dict[str, list[int]] = {}
+    for k, n in enumerate(names):
+        seen.setdefault(_fold(n), []).append(k)
+    return {k for ks in seen.values() if len(ks) > 1 for k in ks}
+
+
+def overlay_names(images: list[dict]) -> list[str]:
+    """The overlay file of each image record, relative to ``--overlay-dir``, one file per record.
+
+    The record's ``file_name`` keeps its folders (``site1/IMG_0001.JPG`` ->
+    ``site1/IMG_0001_pitch.png``), so photos of several folders (``segment -r``) stay apart.
+    Records whose names still meet keep their extension (``dup.jpg`` and ``dup.png`` ->
+    ``dup.jpg_pitch.png``, ``dup.png_pitch.png``); names still alike (``a.jpg`` and ``A.jpg``)
+    get ``~2``, ``~3`` after all but the first in sorted order (``A.jpg_pitch.png``,
+    ``a.jpg~2_pitch.png``), as ``segment`` names its outputs. Names are compared without case,
+    as on macOS and Windows disks, and the names follow from the whole set, not its order
+    (but for a name given twice, numbered in input order)."""
+    parts = [_relative_parts(img.get("file_name") or "") or [f"image{img.get('id', k)}"]
+             for k, img in enumerate(images)]
+
+    def named(k: int, stem: str) -> str:
+        return str(PurePosixPath(*parts[k][:-1], stem + OVERLAY_SUFFIX))
+
+    names = [named(k, PurePosixPath(p[-1]).stem or p[-1]) for k, p in enumerate(parts)]
+    # Twice: a name given its extension may meet another image's stem ("dup.jpg.png").
+    for _ in range(2):
+        for k in _clashing(names):
+            names[k] = named(k, parts[k][-1])
+    # Still alike (a name given twice, or names alike but for case): the first in sorted order
+    # keeps it, the others get ~2, ~3 after it, as segment names its outputs (output_names).
+    clash = _clashing(names)
+    taken = {_fold(n) for k, n in enumerate(names) if k not in clash}
+    for k in sorted(clash, key=lambda k: (names[k], k)):
+        cand, j = names[k], 1
+        while _fold(cand) in taken:
+            j += 1
+            cand = named(k, f"{parts[k][-1]}~{j}")
+        taken.add(_fold(cand))
+        names[k] = cand
+    return names

@@ -50,7 +50,9 @@ def _pitch_results(path: Path, expected: int, fast: bool = False):
     """[(result, image name)] of a pitch JSON or of a photo run through segment/contours/pitch
     (``fast``: one pass of the network, ``chain.photo_input``)."""
     if not path.exists():
-        raise InputError(f"{path}: file not found")
+        from wtcli.jsonio import missing
+
+        raise InputError(f"{path}: {missing(path)}")
     if path.suffix.lower() in PITCH_SUFFIXES:
         from wtcli.pitch.result import read_pitch
 

@@ -37,7 +37,7 @@ import cv2
 import numpy as np
 
 from wtcli.errors import ConfigError, InputError, OutputError, WtError
-from wtcli.jsonio import atomic_write_bytes, document, os_reason, write_json
+from wtcli.jsonio import atomic_write_bytes, document, missing, os_reason, write_json
 from wtcli.outputs import remove_stale, remove_temp_files
 from wtcli.masks import (LABELS, Instances, check_declared_size, instances_document, read_instances,
                          write_instances)
@@ -182,8 +182,7 @@ def read_image(path: Path) -> np.ndarray:
     try:
         data = np.fromfile(str(path), dtype=np.uint8)
     except FileNotFoundError:
-        kind = "broken symbolic link" if path.is_symlink() else "file not found"
-        raise InputError(f"{path}: {kind}") from None
+        raise InputError(f"{path}: {missing(path)}") from None
     except OSError as e:
         raise InputError(f"{path}: cannot read ({os_reason(e)})") from None
     check_declared_size(data, path)
