@@ -47,7 +47,7 @@ def register(app: typer.Typer) -> None:
                            + f" (dropped {cs.dropped} contour(s) <= {cs.area_threshold:g} px)")
         n, bad = len(batch.sets), batch.n_failed
         if out is not None:
-            err_console.print(f"contours of {n - bad}/{n} image(s) -> {out}")
+            err_console.print(f"contours of {n - bad}/{n} image(s) -> {out}", soft_wrap=True)
         if bad:
             if n == 1:
                 raise PerceptionError(batch.errors[0])

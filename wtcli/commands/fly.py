@@ -134,7 +134,7 @@ def register(app: typer.Typer) -> None:
                 path = write_sensitivity(body["sensitivity"], pictures,
                                          f"{s2.name}: automated flight's deviation, one thing "
                                          "changed at a time")
-                err_console.print(f"pictures -> {path}")
+                err_console.print(f"pictures -> {path}", soft_wrap=True)
             doc = document(PAPER_TABLE_SCHEMA, 1, body)
             if out is not None:
                 write_json(out, doc)
@@ -156,25 +156,25 @@ def register(app: typer.Typer) -> None:
         doc = document(FLIGHT_SCHEMA, FLIGHT_VERSION, report.to_dict())
         if out is not None:
             write_json(out, doc)
-            err_console.print(f"flight report -> {out}")
+            err_console.print(f"flight report -> {out}", soft_wrap=True)
         if pictures is not None:
             from wtcli.fly.pictures import write_pictures
 
             paths = write_pictures(report, pictures)
-            err_console.print(f"pictures -> {', '.join(str(p) for p in paths)}")
+            err_console.print(f"pictures -> {', '.join(str(p) for p in paths)}", soft_wrap=True)
         if json_out:
             typer.echo(dumps(doc))
         else:
             _console().print(_flight_table(report))
         for note in report.notes:
-            err_console.print(f"note: {note}")
+            err_console.print(f"note: {note}", soft_wrap=True)
         warnings = report.warnings()
         for w in warnings[:MAX_WARNINGS]:
-            err_console.print(f"[yellow]warning:[/yellow] {escape(w)}", markup=True)
+            err_console.print(f"[yellow]warning:[/yellow] {escape(w)}", markup=True, soft_wrap=True)
         if len(warnings) > MAX_WARNINGS:
             err_console.print(f"[yellow]warning:[/yellow] and {len(warnings) - MAX_WARNINGS} more "
                               "(all in the report: preflight, flights.*.clearance.violations)",
-                              markup=True)
+                              markup=True, soft_wrap=True)
         viol = report.preflight + report.automated.violations
         if viol and fail_on_violation:
             kinds = sorted({v.kind for v in viol})

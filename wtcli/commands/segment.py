@@ -113,7 +113,8 @@ def segment(
             err_console.print(f"failed: {r.error}", soft_wrap=True)
     bad = report["n_failed"]
     err_console.print(f"{len(results) - bad}/{len(results)} image(s) segmented"
-                      + (f" ({report['n_skipped']} already done)" if report["n_skipped"] else ""))
+                      + (f" ({report['n_skipped']} already done)" if report["n_skipped"] else ""),
+                      soft_wrap=True)
     if json_out:
         typer.echo(dumps(report))
     if batch.stopped is not None:

@@ -62,10 +62,10 @@ def register(app: typer.Typer) -> None:
         mission_from_dict(s.to_yaml_dict(), where=str(out))  # what we write must load
         atomic_write_text(out, s.to_yaml_text())
         for p in s.problems:
-            err_console.print(f"[yellow]{escape(p)}[/yellow]", markup=True)
+            err_console.print(f"[yellow]{escape(p)}[/yellow]", markup=True, soft_wrap=True)
         o = s.origin
         typer.echo(f"{len(s.turbines)} turbine(s) from {s.source}; origin "
                    f"{o['lat']:.6f}, {o['lon']:.6f} ({origin}), alt {o['alt']:g} m AMSL; "
                    f"{len(s.problems)} row(s) reported; yaw_deg {s.yaw_deg:g} for every turbine "
                    "(set it on the day)")
-        err_console.print(f"turbines.yaml -> {out}")
+        err_console.print(f"turbines.yaml -> {out}", soft_wrap=True)

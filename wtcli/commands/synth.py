@@ -70,7 +70,7 @@ def synth(
         from wtcli.console import err_console
 
         err_console.print(f"wrote {summary['images']} images, {summary['instances']} instances "
-                          f"to {out}/ (instances.json, ground_truth.json)")
+                          f"to {out}/ (instances.json, ground_truth.json)", soft_wrap=True)
 
 
 def register(app: typer.Typer) -> None:

@@ -135,9 +135,9 @@ def train(
         err_console.print(table)
     err_console.print(f"{summary['iterations']} iterations in {summary['train_seconds']:.0f} s on "
                       f"{summary['device']} ({summary['precision']}); weights -> {summary['weights']}, "
-                      f"resume from {summary['checkpoint']}")
+                      f"resume from {summary['checkpoint']}", soft_wrap=True)
     if summary.get("average"):
-        err_console.print(f"averaged with {average_with} -> {summary['average']}")
+        err_console.print(f"averaged with {average_with} -> {summary['average']}", soft_wrap=True)
     if json_out:
         typer.echo(dumps(document(TRAIN_SCHEMA, 1, summary)))
 
