@@ -93,3 +93,22 @@ def test_ctrl_c_says_interrupted_without_markup_tags(runner):
 
     r = runner.invoke(_app_with(interrupt), ["go"])
     assert r.exit_code == 130 and r.stderr == "interrupted\n" and r.stdout == ""
+
+
+def test_ctrl_c_inside_compiled_code_is_an_interrupt_not_a_bug(runner):
+    """numba's dispatcher turns a Ctrl-C in a kernel into "SystemError: ... returned a result
+    with an exception set", chained to the KeyboardInterrupt."""
+    def kernel():
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as e:
+            raise SystemError("CPUDispatcher(<function trace>) returned a result with an "
+                              "exception set") from e
+
+    r = runner.invoke(_app_with(kernel), ["go"])
+    assert r.exit_code == 130 and r.stderr == "interrupted\n"
+
+    def bug():
+        raise SystemError("a real one")
+    r = runner.invoke(_app_with(bug), ["go"])
+    assert r.exit_code == 1 and "unexpected error: SystemError" in r.stderr

@@ -136,6 +136,24 @@ def test_out_is_a_folder_or_under_a_file(cli, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["d", "f"] and not any(folder.iterdir())
 
 
+def test_an_output_through_a_link_is_written_there_and_a_pipe_is_not_replaced(cli, tmp_path):
+    target = tmp_path / "real" / "contours.json"
+    target.parent.mkdir()
+    target.write_text("{}")
+    link = tmp_path / "link.json"
+    link.symlink_to(target)
+    assert cli("contours", SAMPLE / "instances.json", "--out", link).exit_code == 0
+    assert link.is_symlink() and json.loads(target.read_text())["schema"] == "wtinspect.contours"
+    pipe = tmp_path / "pipe.json"
+    os.mkfifo(pipe)
+    one_error_line(cli("contours", SAMPLE / "instances.json", "--out", pipe), 3, pipe)
+    assert pipe.is_fifo()  # not replaced by a file
+    from wtcli.errors import OutputError
+    from wtcli.jsonio import atomic_write_bytes
+    with pytest.raises(OutputError, match="not a regular file"):
+        atomic_write_bytes(pipe, b"x")  # the write itself refuses too, not only the check first
+
+
 def test_disk_full_stops_the_batch_naming_the_file_and_leaves_no_temporaries(cli, photos, weights,
                                                                              tmp_path, monkeypatch):
     out = tmp_path / "out"

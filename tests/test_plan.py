@@ -824,6 +824,21 @@ def test_plan_over_uneven_ground_keeps_every_leg_above_it():
             g = G[np.argmin(np.linalg.norm(X[:, None, :2] - G[None, :, :2], axis=2), axis=1), 2]
             assert (X[:, 2] >= g + m.settings.min_altitude_m - 1e-6).all(), (r.uav, i, r.component[i + 1])
     assert_safe(plan, m.settings.safe_distance_m)
+    for r in plan.routes:  # every leg in the air moves: no two waypoints at one place at 0 m/s
+        still = np.nonzero(np.linalg.norm(np.diff(r.pos, axis=0), axis=1) <= 1e-6)[0]
+        assert all((r.component[i], r.component[i + 1]) == ("return", "launch") for i in still), \
+            (r.uav, still)  # only a battery swap stands still, on the ground
+
+
+def test_a_detour_holding_a_via_at_a_legs_end_adds_no_leg_of_no_length():
+    from wtcli.plan.mission import distinct_vias
+
+    p, q = np.array([0.0, 0.0, 24.9]), np.array([-34.4, 91.0, 24.9])
+    vias = [np.array([0.0, 0.0, 24.9]), np.array([-10.0, 50.0, 40.0]),
+            np.array([-10.0, 50.0, 40.0]), q.copy()]
+    got = distinct_vias(vias, p, q)
+    assert len(got) == 1 and np.allclose(got[0], [-10.0, 50.0, 40.0])
+    assert distinct_vias([], p, q) == []
 
 
 def test_cli_photo_with_a_low_score_blade_admits_it_and_says_so(cli, tmp_path, monkeypatch):
@@ -1612,3 +1627,23 @@ def test_cli_plan_says_a_dangling_photo_link_is_one(cli, tmp_path):
     assert r.exit_code == 3 and "gone.json: broken symbolic link" in r.stderr
     r = cli("contours", tmp_path / "gone.json")
     assert r.exit_code == 3 and "gone.json: broken symbolic link" in r.stderr
+
+
+def test_exports_without_an_origin_and_an_odd_picture_are_refused_before_planning(cli, tmp_path):
+    import yaml
+
+    doc = yaml.safe_load(SAMPLE.read_text())
+    doc.get("site", {}).pop("origin", None)
+    y = tmp_path / "noorigin.yaml"
+    y.write_text(yaml.safe_dump(doc))
+    r = cli("plan", y, "--export-dir", tmp_path / "ex")
+    assert r.exit_code == 4 and f"{y}: --export-dir writes lat/lon" in r.stderr
+    assert "plan ->" not in r.stderr and not (tmp_path / "ex").exists()
+    r = cli("plan", SAMPLE, "--picture", tmp_path / "p.gif")
+    assert r.exit_code == 2 and "expected a .png or .jpg" in r.stderr
+
+
+def test_the_picture_is_encoded_as_its_name_says(cli, tmp_path):
+    r = cli("plan", SAMPLE, "--picture", tmp_path / "p.jpg")
+    assert r.exit_code == 0, r.stderr
+    assert (tmp_path / "p.jpg").read_bytes()[:2] == b"\xff\xd8"

@@ -51,6 +51,18 @@ def _debug(ctx: typer.Context) -> bool:
     return bool(obj and obj.get("debug")) or os.environ.get("WTINSPECT_DEBUG") == "1"
 
 
+def _interrupted(e: BaseException) -> bool:
+    """An exception raised because of a KeyboardInterrupt: compiled code (numba's dispatcher)
+    reports "returned a result with an exception set" as a SystemError chained to it."""
+    seen = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return False
+
+
 class _Boundary(TyperGroup):
     """Maps our exceptions to one red line on stderr and a documented exit code."""
 
@@ -99,6 +111,9 @@ class _Boundary(TyperGroup):
                               markup=True, soft_wrap=True)
             ctx.exit(ExitCode.INPUT)
         except Exception as e:  # noqa: BLE001 - the one place that catches everything
+            if _interrupted(e):  # Ctrl-C inside a numba kernel comes out wrapped in a SystemError
+                err_console.print("[red]interrupted[/red]", markup=True, soft_wrap=True)
+                ctx.exit(ExitCode.INTERRUPTED)
             self._unexpected(ctx, e)
 
     @staticmethod

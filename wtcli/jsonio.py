@@ -109,15 +109,23 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     """Write ``data`` to a temporary ``.NAME.XXXXXXXX`` beside ``path``, then rename it over
     ``path``: readers see the old file or the new one, never half of one. Any OSError (a file
     in the way, a read-only folder, a full disk) becomes OutputError naming ``path``; the
-    temporary file is removed (``outputs.remove_temp_files`` clears those a kill left)."""
+    temporary file is removed (``outputs.remove_temp_files`` clears those a kill left).
+    A symbolic link is written through (its target replaced, the link kept); a device, pipe
+    or socket in the way is refused rather than replaced by a file."""
     path = Path(path)
+    shown = path
+    if path.is_symlink():
+        path = Path(os.path.realpath(path))
     try:
+        if path.exists() and not (path.is_file() or path.is_dir()):
+            raise OutputError(f"{shown}: is not a regular file (a device, pipe or socket); "
+                              "write to a file")
         if path.is_dir():
             raise IsADirectoryError(errno.EISDIR, "a folder is in the way")
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     except OSError as e:
-        raise write_failed(path, e) from None
+        raise write_failed(shown, e) from None
     try:
         os.fchmod(fd, _FILE_MODE)
         with os.fdopen(fd, "wb") as f:
@@ -126,7 +134,7 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     except BaseException as e:
         Path(tmp).unlink(missing_ok=True)
         if isinstance(e, OSError):
-            raise write_failed(path, e) from None
+            raise write_failed(shown, e) from None
         raise
     return path
 

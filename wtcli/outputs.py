@@ -59,6 +59,11 @@ def writable_file(path: str | Path, what: str = "--out") -> Path:
     path = Path(path)
     if path.is_dir():
         raise OutputError(f"{path}: is a folder; {what} needs a file name")
+    if path.exists() and not path.is_file():  # /dev/null, a pipe: a rename would replace it
+        raise OutputError(f"{path}: is not a regular file (a device, pipe or socket); choose "
+                          f"another {what}")
+    if path.is_symlink():  # written through: the target's folder is where the file goes
+        path = Path(os.path.realpath(path))
     parent = path.parent
     if parent.exists() and not parent.is_dir():
         raise OutputError(f"{path}: cannot be written: {parent} is a file, not a folder")

@@ -8,7 +8,7 @@ from typing import List, Optional
 import typer
 
 from wtcli.console import err_console, stage_bars
-from wtcli.errors import ConfigError
+from wtcli.errors import ConfigError, UsageError
 from wtcli.jsonio import dumps
 from wtcli.plan_file import PLAN_SCHEMA, PLAN_VERSION, write_plan
 
@@ -29,6 +29,7 @@ def _pose(text: str | None):
 
 
 # What each of plan_mission's stages (wtcli.plan.mission.STAGES) does, for the progress bar.
+PICTURE_SUFFIXES = (".png", ".jpg", ".jpeg")
 PLAN_STAGE_TEXT = {"turbines": "trajectories", "legs": "legs between turbines", "routes": "UAV routes",
                "coverage": "coverage check"}
 
@@ -53,7 +54,8 @@ def register(app: typer.Typer) -> None:
             help="With --export-dir, also write a DJI WPML .kmz per sortie for DJI Pilot 2: "
                  "m300-p1, m300-h20, m350-p1, m350-h20, m30 or m30t."),
         picture: Optional[Path] = typer.Option(None, "--picture",
-                                               help="Write front/side/top views of the path (PNG)."),
+                                               help="Write front/side/top views of the path "
+                                                    "(.png, or .jpg)."),
         pattern: str = typer.Option("adaptive", "--pattern",
                                     help="adaptive (real blade angles) or fixed-y (baseline that "
                                          "assumes a Y stop; reported, never refused)."),
@@ -97,7 +99,12 @@ def register(app: typer.Typer) -> None:
                     raise ConfigError("--dji-kmz needs --export-dir (where to write the .kmz files)")
             from wtcli.outputs import check_outputs
             check_outputs(files=[out, picture], folders=[export_dir])  # before planning, not after
+            if picture is not None and picture.suffix.lower() not in PICTURE_SUFFIXES:
+                raise UsageError(f"--picture {picture}: expected a .png or .jpg file name")
             mission = load_mission(turbines_yaml)
+            if export_dir is not None and not mission.site_origin:  # the exports are lat/lon
+                raise ConfigError(f"{turbines_yaml}: --export-dir writes lat/lon and needs "
+                                  "site.origin (lat, lon, alt) in it")
             azimuths, sources = blade_azimuths(mission, list(inputs or []), _pose(camera_pose), fast=fast)
             for tid, src in sources.items():
                 err_console.print(f"{tid}: blade azimuths "
@@ -114,9 +121,9 @@ def register(app: typer.Typer) -> None:
                                    cruise=fl.cruise_speed_m_s, hover=fl.inspection_speed_m_s,
                                    dji=dji_kmz)
                 err_console.print(f"exports: {len(files)} file(s) -> {export_dir}", soft_wrap=True)
-            if picture is not None:
-                ok, png = cv2.imencode(".png", draw_plan(result))
-                atomic_write_bytes(picture, png.tobytes())
+            if picture is not None:  # encoded as its name says
+                ok, buf = cv2.imencode(picture.suffix.lower(), draw_plan(result))
+                atomic_write_bytes(picture, buf.tobytes())
             s = result.summary
             if s.get("notes"):
                 err_console.print(f"note: {len(s['notes'])} adaptation(s) near the hub, nacelle or tower "

@@ -109,6 +109,10 @@ def sortie_waypoints(plan: Plan, route: Route, first: int, last: int) -> list[Wa
     for i in range(first + 1, last):
         j = i - first
         v = float(route.speed[i + 1])
+        if np.linalg.norm(route.pos[i + 1] - route.pos[i]) < 1e-6:
+            raise ConfigError(f"fleet: {route.uav} leg {i}->{i + 1} has no length (two waypoints "
+                              "at one place, a plan edited by hand?); DJI waylines need every "
+                              "leg to move")
         if not 0.0 < v <= MAX_WAYLINE_SPEED_M_S:
             raise ConfigError(
                 f"fleet: {route.uav} leg {i}->{i + 1} is planned at {v:g} m/s; DJI waylines fly "

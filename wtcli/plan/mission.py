@@ -435,6 +435,19 @@ def split_balanced(costs: list[float], parts: int) -> list[tuple[int, int]]:
 # ---- routes --------------------------------------------------------------------------------------------
 
 
+def distinct_vias(vias, p: np.ndarray, q: np.ndarray) -> list[np.ndarray]:
+    """A leg's via points without those at its ends or repeating the one before: a detour may
+    hold a via at an end (a drop straight down onto the return point), and a second waypoint
+    there is a leg of no length, planned at 0 m/s (which DJI waylines refuse)."""
+    out, last = [], np.asarray(p, float)
+    for v in vias:
+        v = np.asarray(v, float)
+        if np.linalg.norm(v - last) > 1e-6 and np.linalg.norm(v - np.asarray(q, float)) > 1e-6:
+            out.append(v)
+            last = v
+    return out
+
+
 def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Mission, site: Site,
                 pp: PassParams, links: dict | None = None, times: list[float] | None = None,
                 missing: list | None = None, cap: float | None = None,
@@ -473,7 +486,7 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
             raise PlanError(f"{uav}: no safe straight or detoured path {what} keeping "
                             f"{pp.leg_required:.2f} m from every turbine part and "
                             f"{s.min_altitude_m:g} m above the ground")
-        return [WP(v, None, False, comp, not fast) for v in vias]
+        return [WP(v, None, False, comp, not fast) for v in distinct_vias(vias, p, q)]
 
     def leg_s(p: np.ndarray, q: np.ndarray) -> float:
         """Cruise time of a transit leg, along its via points once connected."""
