@@ -161,3 +161,140 @@ def test_site_command(tmp_path, runner):
     assert res.exit_code == 3 and "no such file" in res.stderr
     res = runner.invoke(app, ["site", str(path), "--bbox", "1,2,3", "-o", str(out)])
     assert res.exit_code == 4 and "--bbox" in res.stderr
+
+
+# ---- what the turbines.yaml loader refuses is found here first, by row -------------------------
+
+def site_cli(runner, *args):
+    from wtcli.cli import app
+
+    return runner.invoke(app, ["site", *map(str, args)])
+
+
+def test_towers_too_close_later_row_reported_and_skipped(tmp_path, runner):
+    rows = [("1", "C", "90", "116", "-100.0", "37.0"),
+            ("2", "C", "90", "116", "-100.0003", "37.0"),   # 26.7 m from 1
+            ("3", "C", "90", "116", "-100.0", "37.0"),      # on top of 1
+            ("4", "C", "90", "116", "-100.003", "37.0")]    # 267 m away: kept
+    s = build_site(uswtdb(tmp_path, rows))
+    assert [t.id for t in s.turbines] == ["1", "4"]
+    assert s.problems[0].startswith("row 3 (case_id 2): stands 26.7 m from row 2 (case_id 1), "
+                                    "closer than their rotor radii allow (58 + 58 m): skipped")
+    assert s.problems[1].startswith("row 4 (case_id 3): stands 0.0 m from row 2 (case_id 1)")
+    assert [t.id for t in written(s, tmp_path)[1].turbines] == ["1", "4"]
+    out = tmp_path / "o.yaml"
+    res = site_cli(runner, uswtdb(tmp_path, rows[:2]), "-o", out)
+    assert res.exit_code == 0, res.output
+    assert "row 3 (case_id 2): stands 26.7 m" in res.stderr
+    assert [t.id for t in load_mission(out).turbines] == ["1"]
+
+
+def test_site_wider_than_the_loader_holds_is_refused_naming_the_source(tmp_path, runner):
+    rows = [("1", "W", "90", "116", "-100.0", "37.0"), ("2", "W", "90", "116", "-98.8", "37.0")]
+    path = uswtdb(tmp_path, rows)
+    with pytest.raises(ConfigError, match=r"uswtdb.csv: the turbines span 106.8 km \(row 2 "
+                       r"\(case_id 1\) to row 3 \(case_id 2\).*within 50 km.*--bbox"):
+        build_site(path)
+    res = site_cli(runner, path, "-o", tmp_path / "o.yaml")
+    assert res.exit_code == 4 and "uswtdb.csv: the turbines span" in res.stderr
+    assert "o.yaml" not in res.stderr and not (tmp_path / "o.yaml").exists()
+    # 62 km across, 31 km each side of the centroid: written, with the mission-export line
+    rows[1] = ("2", "W", "90", "116", "-99.3", "37.0")
+    s = build_site(uswtdb(tmp_path, rows))
+    assert any("31.2 km from the origin" in p for p in s.problems)
+    written(s, tmp_path)
+    with pytest.raises(ConfigError, match="62.3 km from the first turbine"):
+        build_site(uswtdb(tmp_path, rows), origin="first")
+
+
+def test_repeated_ids_get_unused_suffixes(tmp_path):
+    def ids(case_ids):
+        rows = [(c, "D", "90", "116", f"{-100 - 0.01 * k:.2f}", "37.0")
+                for k, c in enumerate(case_ids)]
+        s = build_site(uswtdb(tmp_path, rows))
+        assert [t.id for t in written(s, tmp_path)[1].turbines] == [t.id for t in s.turbines]
+        return [t.id for t in s.turbines], [p for p in s.problems if "repeats" in p]
+
+    got, said = ids(["1", "1", "1-1"])
+    assert got == ["1", "1-2", "1-1"]
+    assert said == ["row 3 (case_id 1): id '1' repeats an earlier row: written as '1-2'"]
+    assert ids(["1", "1", "1-2", "1"])[0] == ["1", "1-3", "1-2", "1-4"]
+    assert ids(["7", "7", "7"])[0] == ["7", "7-2", "7-3"]
+    feats = [node(k + 1, 8.0 + 0.01 * k, 50.0, ref=r, height="100", **{"rotor:diameter": "100"})
+             for k, r in enumerate(["A", "A", "A-2", "A"])]
+    s = build_site(osm(tmp_path, feats))
+    assert [t.id for t in s.turbines] == ["A", "A-3", "A-2", "A-4"]
+    written(s, tmp_path)
+
+
+def test_osm_lengths_in_other_forms_and_unreadable_values(tmp_path):
+    feats = [node(1, 8.00, 50.0, height="90,5", **{"rotor:diameter": "116"}),
+             node(2, 8.01, 50.0, height="0.1 km", **{"rotor:diameter": "116 M"}),
+             node(3, 8.02, 50.0, height="295'", **{"rotor:diameter": "380'7\""}),
+             node(4, 8.03, 50.0, height=95, **{"rotor:diameter": 116.5}),
+             node(5, 8.04, 50.0, height="1.2 km", **{"rotor:diameter": "116"}),
+             node(6, 8.05, 50.0, height="ninety", **{"rotor:diameter": "116"}),
+             node(7, 8.06, 50.0, height="90", **{"rotor:diameter": "100-120"}),
+             node(8, 8.07, 50.0, height="-90", **{"rotor:diameter": "116"})]
+    s = build_site(osm(tmp_path, feats), hub_default=100, diam_default=110)
+    got = {t.id: (t.hub_height_m, t.rotor_diameter_m) for t in s.turbines}
+    assert got == {"osm1": (90.5, 116), "osm2": (100, 116), "osm3": (89.92, 116.0),
+                   "osm4": (95, 116.5)}
+    assert s.problems == [
+        "feature 4 (node/5): hub height 1200 m outside [10, 250]: skipped",
+        "feature 5 (node/6): hub height 'ninety' unreadable: skipped",
+        "feature 6 (node/7): rotor diameter '100-120' unreadable: skipped",
+        "feature 7 (node/8): hub height is -90: skipped"]
+    assert not any("from --hub-height" in p for p in s.problems), "a present value is never filled"
+    written(s, tmp_path)
+    rows = [("1", "U", "abc", "116", "-100.0", "37.0")]  # the CSV alike
+    s = build_site(uswtdb(tmp_path, rows + [ROWS[0]]), hub_default=90)
+    assert s.problems == ["row 2 (case_id 1): hub height 'abc' unreadable: skipped"]
+
+
+@pytest.mark.parametrize("args, say", [
+    (["--hub-height", "-5"], "--hub-height: expected a number in [10, 250] m"),
+    (["--hub-height", "5000"], "--hub-height: expected a number in [10, 250] m"),
+    (["--hub-height", "nan"], "--hub-height: expected a number in [10, 250] m"),
+    (["--rotor-diameter", "inf"], "--rotor-diameter: expected a number in [5, 300] m"),
+    (["--rotor-diameter", "2"], "--rotor-diameter: expected a number in [5, 300] m"),
+    (["--hub-height", "40", "--rotor-diameter", "100"], "--hub-height 40 leaves no room for "
+                                                        "--rotor-diameter 100"),
+    (["--yaw-deg", "400"], "--yaw-deg: expected a number in [0, 360]")])
+def test_fill_options_checked_up_front(tmp_path, runner, args, say):
+    res = site_cli(runner, uswtdb(tmp_path), *args, "-o", tmp_path / "o.yaml")
+    assert res.exit_code == 4, res.output
+    assert say in res.stderr and len(res.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "o.yaml").exists()
+
+
+def test_geojson_with_a_byte_order_mark(tmp_path):
+    path = tmp_path / "bom.geojson"
+    doc = {"type": "FeatureCollection", "features": [node(1, 8.0, 50.0, height="100",
+                                                          **{"rotor:diameter": "110"})]}
+    path.write_bytes(b"\xef\xbb\xbf" + json.dumps(doc).encode())
+    assert [t.id for t in build_site(path).turbines] == ["osm1"]
+    path.write_bytes(b"\xef\xbb\xbf" + json.dumps(doc).replace("50.0", "NaN").encode())
+    with pytest.raises(InputError, match="NaN is not a finite number"):
+        build_site(path)
+    path.write_bytes(b"\xef\xbb\xbf{")
+    with pytest.raises(InputError, match="not valid JSON"):
+        build_site(path)
+
+
+def test_bbox_across_the_antimeridian(tmp_path, runner):
+    rows = [("1", "A", "90", "116", "179.999", "-17.0"), ("2", "A", "90", "116", "-179.999", "-17.0"),
+            ("3", "A", "90", "116", "179.995", "-17.002"), ("4", "A", "90", "116", "170.0", "-17.0"),
+            ("5", "A", "90", "116", "-170.0", "-17.0")]
+    path = uswtdb(tmp_path, rows)
+    s = build_site(path, bbox=(179.9, -17.1, -179.9, -16.9))
+    assert [t.id for t in s.turbines] == ["1", "2", "3"] and not s.problems
+    assert abs(s.origin["lon"]) > 179.99  # the centroid on the sphere, not the mean of +-180
+    _, m = written(s, tmp_path)
+    assert np.hypot(*np.subtract(m.turbines[0].base_xyz, m.turbines[1].base_xyz)[:2]) \
+        == pytest.approx(212.9, abs=0.5)
+    assert [t.id for t in build_site(path, bbox=(169, -18, 171, -16)).turbines] == ["4"]
+    res = site_cli(runner, path, "--bbox=179.9,-17.1,-179.9,-16.9", "-o", tmp_path / "o.yaml")
+    assert res.exit_code == 0, res.output
+    res = site_cli(runner, path, "--bbox=10,-17.1,10,-16.9", "-o", tmp_path / "o.yaml")
+    assert res.exit_code == 4 and "across the antimeridian has min_lon > max_lon" in res.stderr

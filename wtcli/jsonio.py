@@ -202,7 +202,8 @@ def read_json(path: str | Path, schema: str | None = None,
     from another tool), but never one with another schema or a newer version."""
     path = Path(path)
     try:
-        text = read_capped(path, max_bytes, "JSON")
+        # A UTF-8 byte-order mark (Windows editors, some exporters) is ignored, as RFC 8259 allows.
+        text = read_capped(path, max_bytes, "JSON").removeprefix("\ufeff")
     except UnicodeDecodeError:
         raise InputError(f"{path}: not valid JSON (not UTF-8 text)") from None
     try:

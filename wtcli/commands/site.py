@@ -35,7 +35,8 @@ def register(app: typer.Typer) -> None:
                                               help="USWTDB: keep the rows whose p_name is this "
                                                    "(case-insensitive)."),
         bbox: Optional[str] = typer.Option(None, "--bbox", metavar="MIN_LON,MIN_LAT,MAX_LON,MAX_LAT",
-                                           help="Keep the turbines inside this box (degrees)."),
+                                           help="Keep the turbines inside this box (degrees; "
+                                                "MIN_LON > MAX_LON: across the antimeridian)."),
         origin: str = typer.Option("centroid", "--origin",
                                    help="site.origin at the turbines' centroid or the first one."),
         origin_alt: float = typer.Option(0.0, "--origin-alt", metavar="M",
@@ -45,10 +46,11 @@ def register(app: typer.Typer) -> None:
                                       help="Rotor heading written for every turbine (not in the "
                                            "databases: set it per turbine on the day)."),
         hub_height: Optional[float] = typer.Option(None, "--hub-height", metavar="M",
-                                                   help="Fill a missing hub height (reported per "
-                                                        "row); without it such rows are skipped."),
+                                                   help="Fill a missing hub height, 10-250 m "
+                                                        "(reported per row); without it such rows "
+                                                        "are skipped."),
         rotor_diameter: Optional[float] = typer.Option(None, "--rotor-diameter", metavar="M",
-                                                       help="Fill a missing rotor diameter "
+                                                       help="Fill a missing rotor diameter, 5-300 m "
                                                             "(reported per row)."),
     ) -> None:
         """Build a turbines.yaml from a turbine list you already have (USWTDB, OpenStreetMap)."""
@@ -59,7 +61,8 @@ def register(app: typer.Typer) -> None:
         s = build_site(source, project=project, bbox=_bbox(bbox), origin=origin,
                        origin_alt_m=origin_alt, yaw_deg=yaw_deg, hub_default=hub_height,
                        diam_default=rotor_diameter)
-        mission_from_dict(s.to_yaml_dict(), where=str(out))  # what we write must load
+        # what we write must load: build_site checked it row by row; this is the backstop
+        mission_from_dict(s.to_yaml_dict(), where=str(out))
         atomic_write_text(out, s.to_yaml_text())
         for p in s.problems:
             err_console.print(f"[yellow]{escape(p)}[/yellow]", markup=True, soft_wrap=True)
