@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from wtcli.errors import PlanError
+from wtcli.errors import InputError, PlanError
 from wtcli.fly.flight import fly_plan, plan_violations
 from wtcli.fly.scenario import default_scenario
 from wtcli.plan_file import Plan, write_plan
@@ -195,3 +195,79 @@ def test_wind_above_the_documented_limit_at_hub_height_is_a_warning():
         assert (len(said) == 1) is warned, (v, said)
         if warned:
             assert "12.0 m/s mean at hub height" in said[0] and "do not fly" in said[0]
+
+
+def _shifted(plan: Plan, dz: float) -> Plan:
+    """``plan`` moved up by ``dz`` metres: turbines, waypoints and the stated launch point."""
+    summary = dict(plan.summary)
+    if "launch" in summary:
+        summary["launch"] = [summary["launch"][0], summary["launch"][1], summary["launch"][2] + dz]
+    return replace(plan, turbines=[replace(t, base=(t.base[0], t.base[1], t.base[2] + dz))
+                                   for t in plan.turbines],
+                   routes=[replace(r, pos=np.asarray(r.pos, float) + [0.0, 0.0, dz])
+                           for r in plan.routes], summary=summary)
+
+
+def test_a_launch_point_at_a_real_height_lands_on_flat_ground_like_one_at_zero():
+    """A plan whose tower base and launch point stand 40 m up (``wtinspect site`` writes real
+    heights) flown on a flat scenario: the ground is level with them, so its battery swaps are
+    landings and it flies the sorties of the same plan at z = 0 (the drone used to count as
+    landed only within 0.5 m of z = 0: one sortie over the whole flight, reported as eating into
+    the reserve, and the pre-flight check summed all sorties into one)."""
+    from wtcli.fly.flight import check_feasible, make_ground
+    from wtcli.geometry import Turbine
+    from wtcli.plan.config import Fleet, Mission, Settings
+    from wtcli.plan.mission import plan_mission
+
+    t = Turbine.with_rotor_azimuth(90, id="T1", base=(0.0, 0.0, 40.0), hub_height=30.0,
+                                   rotor_diameter=24.0, yaw_deg=180.0)
+    high = plan_mission(Mission((t,), CAM, fleet=Fleet(battery_minutes=3.0, battery_reserve_minutes=0.5,
+                                                       battery_swap_s=20.0),
+                                settings=Settings(min_side_coverage=0.0, inspect_tower=False,
+                                                  inspect_nacelle=False)))
+    assert high.routes[0].pos[0][2] == pytest.approx(40.0) and high.summary["per_uav"]["UAV1"]["sorties"] == 3
+    low = _shifted(high, -40.0)
+    scn = default_scenario(wind={"speed_ms": 4.0, "reference_height_m": 30.0}, seed=3)
+    a, b = (fly_plan(p, scn).automated for p in (high, low))
+    sa, sb = a.sorties_flown(), b.sorties_flown()
+    assert len(sa) == len(sb) == 3
+    for x, y in zip(sa, sb):
+        assert x["time_s"] == pytest.approx(y["time_s"], abs=0.05)
+        assert x["energy_wh"] == pytest.approx(y["energy_wh"], rel=1e-3)  # the same wind heights
+        assert x["reserve_intact"] is y["reserve_intact"] is True
+    assert not any("reserve" in w for w in a.warnings())
+    assert a.to_dict()["min_height_above_ground_m"] == pytest.approx(
+        b.to_dict()["min_height_above_ground_m"], abs=0.05)
+    # The pre-flight check splits the plan into the same sorties: each within twice a small
+    # battery's hover endurance (6 Wh at 730 W: 59 s), all three together (90 s) not.
+    small = default_scenario(vehicle={"battery_wh": 6.0})
+    for p in (high, low):
+        check_feasible(p, small, make_ground(p, small), "plan.json")
+    # ... and a sortie beyond a smaller battery is named alike at both heights.
+    tiny = default_scenario(vehicle={"battery_wh": 3.0})
+    msgs = []
+    for p in (high, low):
+        with pytest.raises(InputError, match=r"a sortie of at least") as e:
+            check_feasible(p, tiny, make_ground(p, tiny), "plan.json")
+        msgs.append(str(e.value))
+    assert msgs[0] == msgs[1] and "waypoints[0] to" not in msgs[0]
+
+
+def test_flat_ground_is_the_planners_ground_where_bases_stand_at_different_heights():
+    """Flat terrain: the height of the nearest turbine base or launch point, the ground the
+    planner keeps its minimum altitude above (``Site.ground_z``); a route that starts in the
+    air (built by hand) is no launch point."""
+    from wtcli.fly.flight import make_ground
+    from wtcli.plan.clearance import Site
+
+    ts = [turbine(id="T1", base=(0.0, 0.0, 14.9)), turbine(id="T2", base=(300.0, 0.0, 6.6)),
+          turbine(id="T3", base=(600.0, 50.0, 0.4))]
+    launch = np.array([-40.0, 90.0, 12.0])
+    r = route_through([launch, launch + [0, 0, 10], [650.0, 60.0, 60.0]], component="launch")
+    plan = Plan(ts, CAM, [r], safe_distance_m=3.0, target_gsd_mm=1.5)
+    pts = np.random.default_rng(0).uniform([-200, -200, 0], [800, 300, 100], (2000, 3))
+    ground = make_ground(plan, default_scenario())
+    assert np.array_equal(ground.height(pts), Site(ts, launch=launch).ground_z(pts))
+    in_air = Plan(ts, CAM, [route_through([[-40.0, 90.0, 50.0], [650.0, 60.0, 60.0]])], 3.0, 1.5)
+    assert np.array_equal(make_ground(in_air, default_scenario()).height(pts),
+                          Site(ts).ground_z(pts))

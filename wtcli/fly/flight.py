@@ -33,6 +33,7 @@ from wtcli.plan_file import Plan, Route
 
 FLIGHT_KINDS = ("automated", "no_compensation", "fixed_pattern", "manual")
 SETTLED_M = 0.5
+LANDED_M = 0.5  # a set-point this close to the ground (or its launch point) stands on it
 LEASH_SLACK_S = 30.0  # room for the set-point to wait (control.leash_m): 30 s plus 30 %
 LEASH_SLACK_FRAC = 0.30  # of the route's planned time
 # Streams of the seeded random generator, so each source of randomness is independent.
@@ -388,17 +389,19 @@ def _episodes(mask: np.ndarray) -> list[tuple[int, int]]:
 
 def _sorties(f: UavFlight, scn: Scenario, ground: Ground) -> list[tuple[float, float]]:
     """(energy Wh, flown time s) of each sortie. Momentum-theory power, P = P_hover (|T| / g)^1.5
-    plus climb power m g v_z / eta; zero while the vehicle stands on the ground (motors off: a
-    battery swap), which also separates the sorties. A sortie's time runs from its take-off (the
-    start, or the end of a swap) to its landing (the last one: the set-point reaching the last
-    waypoint), as the planner counts it against battery minus reserve."""
+    plus climb power m g v_z / eta; zero while the vehicle stands on the ground (``on_ground``,
+    the set-point still: motors off, a battery swap), which also separates the sorties. A
+    sortie's time runs from its take-off (the start, or the end of a swap) to its landing (the
+    last one: the set-point reaching the last waypoint), as the planner counts it against
+    battery minus reserve."""
     veh, track, ref = scn.vehicle, f.track, f.ref
     T = np.linalg.norm(track.thrust + np.array([0, 0, G]), axis=1)
     p = veh.hover_power_w * (T / G) ** 1.5
     p += veh.mass_kg * G * np.maximum(track.vel[:, 2], 0.0) / veh.propulsion_efficiency
     dt = float(track.t[1] - track.t[0]) if len(track.t) > 1 else 0.0
-    ref_agl = ref.pos[:, 2] - ground.height(ref.pos)
-    landed = (ref_agl < 0.5) & (np.linalg.norm(ref.vel, axis=1) < 0.05)  # the plan says so
+    # The plan says so: the set-point stands still on the ground it took off from.
+    landed = on_ground(ref.pos, launch_point(f.planned), ground) \
+        & (np.linalg.norm(ref.vel, axis=1) < 0.05)
     p = np.where(landed, 0.0, p)
     t = track.t
     sorties, start = [], 0
@@ -586,10 +589,32 @@ def fly_routes(plan: Plan, scn: Scenario, ground: Ground, mode: str,
     return out
 
 
+def launch_point(route: Route) -> np.ndarray | None:
+    """Where ``route`` takes off, on the ground: its first waypoint where the plan marks it
+    ``launch`` (``wtinspect plan``'s routes start and end at the launch point on the ground,
+    docs/plan.md); None for a route that starts in the air (a plan built by hand)."""
+    if len(route) == 0 or str(route.component[0]) != "launch":
+        return None
+    return np.asarray(route.pos[0], float)
+
+
 def make_ground(plan: Plan, scn: Scenario) -> Ground:
-    """The scenario's ground, level with each turbine's base and each route's launch point."""
-    pads = [t.base for t in plan.turbines] + [r.pos[0] for r in plan.routes]
+    """The scenario's ground, level with each turbine's base and each route's launch point
+    (``wtcli.fly.terrain``: flat ground at the height of the nearest of them, as planned)."""
+    pads = [t.base for t in plan.turbines]
+    pads += [p for p in (launch_point(r) for r in plan.routes) if p is not None]
     return Ground.build(scn.terrain, np.array(pads, float), scn.seed)
+
+
+def on_ground(pos: np.ndarray, launch: np.ndarray | None, ground: Ground) -> np.ndarray:
+    """(N,) bool: each point stands on the ground: within LANDED_M of the launch point it took
+    off from (the plan's, at its own height) or less than LANDED_M above the terrain under it.
+    The one notion of landed, for the sorties flown and the plan's sorties checked before."""
+    P = np.atleast_2d(np.asarray(pos, float))
+    down = (P[:, 2] - ground.height(P)) < LANDED_M
+    if launch is not None:
+        down |= np.linalg.norm(P - launch, axis=1) < LANDED_M
+    return down
 
 
 @dataclass(frozen=True)
@@ -704,15 +729,16 @@ def check_feasible(plan: Plan, scn: Scenario, ground: Ground, source: str) -> No
                 f"waypoints[{i}]: at least {t_min[i]:.0f} s at the vehicle's top speed "
                 f"({veh.max_speed_ms:g} m/s), the plan gives the leg {planned[i]:.1f} s; not "
                 "flown (a waypoint moved by hand?)")
-        # Sorties: split where the plan stands on the ground (a battery swap).
-        down = (P[:, 2] - ground.height(P)) < 0.5
+        # Sorties: split where the plan stands on the ground (a battery swap), as flown.
+        down = on_ground(P, launch_point(r), ground)
         start = 0
         for j in range(1, len(P) + 1):
             if j == len(P) or (down[j] and j > start):
                 need = float(t_min[start:j].sum()) if j > start else 0.0
                 if need > SORTIE_BATTERY_FACTOR * endurance_s:
                     raise InputError(
-                        f"{source}: routes[{ri}].waypoints[{start}] to waypoints[{j - 1}]: a "
+                        f"{source}: routes[{ri}].waypoints[{start}] to "
+                        f"waypoints[{min(j, len(P) - 1)}]: a "
                         f"sortie of at least {need / 60:.0f} min at the vehicle's top speed, the "
                         f"battery ({veh.battery_wh:g} Wh) hovers {endurance_s / 60:.0f} min; "
                         "not flown (a waypoint moved by hand?)")
@@ -756,5 +782,5 @@ def fly_plan(plan: Plan, scn: Scenario, baselines: bool = False, fixed_plan: Pla
 
 
 __all__ = ["FLIGHT_KINDS", "FlightReport", "FlightResult", "UavFlight", "Violation", "describe",
-           "plan_violations", "fly_plan",
+           "launch_point", "make_ground", "on_ground", "plan_violations", "fly_plan",
            "fly_route", "measure", "path_deviation", "turbine_clearance"]

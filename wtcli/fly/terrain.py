@@ -1,8 +1,15 @@
-"""The ground under the flight: flat (z = 0) or a seeded smooth hilly height field.
+"""The ground under the flight: flat ground level with the site, or seeded smooth hills.
 
-Hills are a sum of a few seeded plane waves of the given wavelength, scaled to the given
-amplitude, and blended to the height of each "pad" within about 60 m of it: the turbines' bases
-and the launch points stand on level ground. ``height(x, y)`` is vectorised; the flight loop never calls it.
+The ground stands where the plan's turbines and launch points stand (the "pads": each
+turbine's base and each route's launch point). Its level under a point is the height of the
+nearest pad, horizontally (the first of equally near ones): the planner's own ground
+(``wtcli.plan.clearance.Site.ground_z``, docs/plan.md "Checks before writing"), so a plan
+whose bases stand at a real height (``wtinspect site`` writes them so) is flown over the
+ground it was planned over, not 40 m above a ground at z = 0. ``flat`` terrain is that level;
+``hilly`` adds a sum of a few seeded plane waves of the given wavelength, scaled to the given
+amplitude, blended back to each pad's height within about 60 m of it, so the turbines and the
+launch points stand on level ground. ``height(x, y)`` is vectorised; the flight loop never
+calls it.
 """
 
 from __future__ import annotations
@@ -15,6 +22,7 @@ import numpy as np
 from wtcli.fly.scenario import Terrain
 
 PAD_RADIUS_M = 60.0
+_CHUNK = 16384  # points per block of the nearest-pad search
 
 
 @dataclass(frozen=True)
@@ -23,10 +31,10 @@ class Ground:
     k: np.ndarray  # (W, 2) wave vectors
     phase: np.ndarray  # (W,)
     scale: float
-    pads: np.ndarray  # (T, 3) turbine bases
+    pads: np.ndarray  # (T, 3) turbine bases, then launch points
 
     @classmethod
-    def build(cls, terrain: Terrain, bases: np.ndarray, seed: int) -> Ground:
+    def build(cls, terrain: Terrain, pads: np.ndarray, seed: int) -> Ground:
         rng = np.random.default_rng([seed, 7])
         waves = 6
         ang = rng.uniform(0, 2 * math.pi, waves)
@@ -34,18 +42,35 @@ class Ground:
         k = np.stack([kmag * np.cos(ang), kmag * np.sin(ang)], 1)
         phase = rng.uniform(0, 2 * math.pi, waves)
         scale = terrain.amplitude_m / math.sqrt(waves / 2) if terrain.kind == "hilly" else 0.0
-        return cls(terrain, k, phase, scale, np.asarray(bases, float).reshape(-1, 3))
+        return cls(terrain, k, phase, scale, np.asarray(pads, float).reshape(-1, 3))
 
     def _raw(self, xy: np.ndarray) -> np.ndarray:
         if self.scale == 0:
             return np.zeros(len(xy))
         return self.scale * np.sin(xy @ self.k.T + self.phase).sum(axis=1)
 
+    def level(self, xy: np.ndarray) -> np.ndarray:
+        """The site's level under each point: the height of the nearest pad in x/y (the first
+        of equally near ones); 0 without pads."""
+        xy = np.atleast_2d(np.asarray(xy, float))[:, :2]
+        pads = self.pads
+        if not len(pads):
+            return np.zeros(len(xy))
+        z = pads[:, 2]
+        if np.all(z == z[0]):
+            return np.full(len(xy), z[0])
+        out = np.empty(len(xy))
+        for s in range(0, len(xy), _CHUNK):
+            d2 = ((xy[s:s + _CHUNK, None, :] - pads[None, :, :2]) ** 2).sum(-1)
+            out[s:s + _CHUNK] = z[np.argmin(d2, axis=1)]
+        return out
+
     def height(self, xy: np.ndarray) -> np.ndarray:
         xy = np.atleast_2d(np.asarray(xy, float))[:, :2]
+        h = self.level(xy)
         if self.terrain.kind == "flat":
-            return np.zeros(len(xy))
-        h = self._raw(xy)
+            return h
+        h = h + self._raw(xy)
         # Blend to each pad's height near it.
         for b in self.pads:
             d2 = ((xy - b[:2]) ** 2).sum(axis=1)
