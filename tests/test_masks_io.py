@@ -139,3 +139,24 @@ def test_class_map_gives_each_pixel_one_class_nacelle_over_tower_over_blade():
     # the category ids of the instances file
     assert [c["id"] for c in CATEGORIES if c["name"] in ("blade", "tower", "nacelle")] == [1, 2, 3]
     assert (Instances.empty(3, 4).class_map() == 0).all()
+
+
+def test_annotations_of_no_image_are_refused_not_dropped(tmp_path):
+    """An export whose ids do not meet (image_id "1" against id 1) would train on nothing."""
+    import json as _json
+
+    from wtcli.errors import InputError
+    from wtcli.masks import read_instances
+
+    doc = {"images": [{"id": 1, "file_name": "a.png", "width": 4, "height": 4}],
+           "annotations": [{"id": 1, "image_id": "1", "category_id": 1, "bbox": [0, 0, 2, 2],
+                            "segmentation": [[0, 0, 2, 0, 2, 2, 0, 2]]}],
+           "categories": [{"id": 1, "name": "blade"}, {"id": 2, "name": "tower"},
+                          {"id": 3, "name": "nacelle"}]}
+    p = tmp_path / "x.json"
+    p.write_text(_json.dumps(doc))
+    with pytest.raises(InputError, match=r"1 annotation\(s\) name an image_id no image has"):
+        read_instances(p)
+    doc["annotations"][0]["image_id"] = 1
+    p.write_text(_json.dumps(doc))
+    assert len(read_instances(p)) == 1

@@ -540,3 +540,65 @@ def test_a_nacelle_the_mask_does_not_tell_apart_is_taught_as_nothing():
         assert (t & a.ignore).sum() <= 0.005 * t.sum()  # resampled alike: apart
     _, target = D.to_target(sample)
     assert target["ignore_boxes"].shape == (1, 4)
+
+
+def test_a_resume_that_asks_for_another_run_is_refused(tmp_path):
+    from wtcli.errors import ConfigError
+
+    train(_tiny(tmp_path, iterations=1, eval_count=0, seed=2))
+    for other in (dict(seed=3), dict(lr=5e-4), dict(batch_size=1),
+                  dict(view_mix="mixed=0.5,closeup=0.5")):
+        with pytest.raises(ConfigError, match="the run was started with"):
+            train(_tiny(tmp_path, **{"iterations": 2, "eval_count": 0, "seed": 2, "resume": True,
+                                     **other}))
+    # longer, elsewhere: fine
+    s = train(_tiny(tmp_path, iterations=2, eval_count=0, seed=2, resume=True, threads=1))
+    assert s["iterations"] == 2
+
+
+def test_ctrl_c_keeps_the_steps_since_the_last_checkpoint(tmp_path):
+    import torch as _t
+
+    def stop(rec):
+        if rec["iteration"] == 2:
+            raise KeyboardInterrupt
+    with pytest.raises(KeyboardInterrupt):
+        train(_tiny(tmp_path, iterations=5, eval_count=0, checkpoint_every=100), progress=stop)
+    assert int(_t.load(tmp_path / "run" / "last.ckpt", weights_only=True)["iteration"]) == 2
+    assert train(_tiny(tmp_path, iterations=3, eval_count=0, checkpoint_every=100,
+                       resume=True))["iterations"] == 3
+
+
+def test_a_data_workers_error_reads_as_its_own_message():
+    from wtcli.errors import InputError
+    from wtcli.segment.train import _from_worker
+
+    wrapped = InputError("Caught InputError in DataLoader worker process 0.\nOriginal Traceback "
+                         "(most recent call last):\n  File \"x.py\", line 1, in f\n"
+                         "wtcli.errors.InputError: photos/a.png: mask is 10x10, its image 20x20\n")
+    got = _from_worker(wrapped)
+    assert isinstance(got, InputError) and str(got) == "photos/a.png: mask is 10x10, its image 20x20"
+    plain = InputError("a.png: not a readable image")
+    assert _from_worker(plain) is plain
+
+
+def test_a_colour_mask_is_refused_not_read_as_background(tmp_path):
+    """OpenCV gives a palette or colour-coded PNG as colours: blade red (0, 0, 128 in BGR) and
+    tower green would both read 0 in one channel, so the photo would train as background."""
+    import cv2
+
+    from wtcli.errors import InputError
+    from wtcli.segment.real import RealPhoto, read_pair
+
+    cv2.imwrite(str(tmp_path / "a.png"), np.full((8, 8, 3), 90, np.uint8))
+    colour = np.zeros((8, 8, 3), np.uint8)
+    colour[2:4, :, 2] = 128  # blade, red
+    colour[5:7, :, 1] = 128  # tower, green
+    cv2.imwrite(str(tmp_path / "m.png"), colour)
+    photo = RealPhoto(tmp_path / "a.png", tmp_path / "m.png", "a", "s", "front", "")
+    with pytest.raises(InputError, match="a colour mask"):
+        read_pair(photo)
+    grey = np.zeros((8, 8, 3), np.uint8)
+    grey[2:4], grey[5:7] = 1, 2  # class numbers stored as RGB: read as they are
+    cv2.imwrite(str(tmp_path / "m.png"), grey)
+    assert sorted(np.unique(read_pair(photo)[1]).tolist()) == [0, 1, 2]

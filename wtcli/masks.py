@@ -370,6 +370,13 @@ def read_instances(path: str | Path) -> list[tuple[dict, Instances]]:
             raise InputError(f"{path}: every annotation needs an integer 'image_id', got "
                              f"{shown(a.get('image_id') if isinstance(a, dict) else a)}")
         by_image.setdefault(a["image_id"], []).append(a)
+    known = {img.get("id") for img in doc["images"]
+             if isinstance(img, dict) and isinstance(img.get("id"), (int, str))}
+    lost = [k for k in by_image if k not in known]
+    if lost:  # an export whose ids do not meet (text "1" against 1) would train on nothing
+        n = sum(len(by_image[k]) for k in lost)
+        raise InputError(f"{path}: {n} annotation(s) name an image_id no image has (e.g. "
+                         f"{shown(lost[0])}; image ids are e.g. {shown(next(iter(known), None))})")
     out = []
     for i, img in enumerate(doc["images"]):
         if not isinstance(img, dict) or not all(k in img for k in ("id", "width", "height")):

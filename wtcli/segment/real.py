@@ -155,6 +155,13 @@ def read_pair(photo: RealPhoto, max_side: int | None = MAX_SIDE) -> tuple[np.nda
     if sem is None:
         raise InputError(f"{photo.mask}: not a readable mask")
     if sem.ndim == 3:
+        # A palette or colour-coded PNG comes out of OpenCV as colours, not class numbers:
+        # grey stored as RGB is fine, anything else would be read as other classes.
+        if sem.shape[2] == 4:
+            sem = sem[:, :, :3]
+        if not (sem == sem[:, :, :1]).all():
+            raise InputError(f"{photo.mask}: a colour mask (a palette or colour-coded PNG); "
+                             "expected one channel of class numbers 0, 1 (blade), 2 (tower)")
         sem = sem[:, :, 0]
     h, w = img.shape[:2]
     if sem.shape != (h, w):

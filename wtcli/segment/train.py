@@ -26,7 +26,7 @@ from typing import Any, Callable
 import numpy as np
 import torch
 
-from wtcli.errors import ConfigError, InputError, ModelError
+from wtcli.errors import ConfigError, InputError, ModelError, WtError
 from wtcli.jsonio import atomic_write_bytes, document, write_json
 from wtcli.segment import data as D
 from wtcli.segment.infer import MASK_OFFSET_PX
@@ -243,6 +243,34 @@ def _cfg_dict(cfg: TrainConfig) -> dict[str, Any]:
     return d
 
 
+# What a resumed run must keep: its data, its order and its recipe ("continues exactly there").
+# A run may be resumed longer (--iterations, --max-minutes) or elsewhere (device, threads).
+RESUME_SAME = ("data", "real", "real_share", "real_holdout", "seed", "batch_size", "lr", "warmup",
+               "weight_decay", "width", "height", "train_sizes", "stops", "view_mix", "augment",
+               "synth_count", "init")
+
+
+def _same_run(path: Path, was: dict[str, Any], cfg: TrainConfig) -> None:
+    """ConfigError (exit 4) when a resume asks for another run than the checkpoint's, e.g. other
+    data, or another held-out sequence (which would leak it into a cross-validated fold)."""
+    now = _cfg_dict(cfg)
+    for k in RESUME_SAME:
+        if k in was and was[k] != now.get(k):
+            raise ConfigError(f"{path}: the run was started with {k} {was[k]!r}; resume it with "
+                              f"that (asked {now.get(k)!r}), or start a new run in another --out")
+
+
+def _from_worker(e: Exception) -> Exception:
+    """A data-loading worker's error as the user should read it: torch re-raises it as "Caught
+    InputError in DataLoader worker process 0. Original Traceback ..." ending in the message."""
+    text = str(e)
+    if not text.startswith("Caught "):
+        return e
+    head = f"{type(e).__module__}.{type(e).__qualname__}: "
+    last = [ln for ln in text.splitlines() if ln.startswith(head)]
+    return type(e)(last[-1][len(head):]) if last else e
+
+
 def _load_ckpt(path: Path) -> dict[str, Any]:
     try:
         ck = torch.load(path, map_location="cpu", weights_only=True)
@@ -283,6 +311,7 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
         if state.get("arch") != ARCH:
             raise ModelError(f"{ckpt_path}: a checkpoint of architecture {state.get('arch')!r}, this "
                              f"wtinspect trains {ARCH!r}; start a new run with --init {out / 'model.pt'}")
+        _same_run(ckpt_path, state.get("config") or {}, cfg)
         model.load_state_dict(state["state_dict"])
         start_it, elapsed0 = int(state["iteration"]), float(state.get("elapsed_s", 0.0))
         history = list(state.get("history", []))
@@ -316,41 +345,49 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
     stopped = "iterations"
     if precision == "bf16":
         backbone_in_bf16(model)
-    if it < cfg.iterations:
-        stream = _mixed_batches if cfg.real else _batches
-        for images, targets in stream(ds, cfg, start_it):
-            elapsed = elapsed0 + time.monotonic() - t0
-            prog = it / cfg.iterations
-            if budget_s:
-                prog = max(prog, elapsed / budget_s)
-            f = lr_factor(prog, it, cfg.warmup)
-            for g in opt.param_groups:
-                g["lr"] = cfg.lr * f * g.get("lr_mult", 1.0)
-            images = [im.to(device) for im in images]
-            targets = [{k: v.to(device) for k, v in t.items()} for t in targets]
-            losses = model(images, targets)
-            loss = sum(losses.values())
-            if not torch.isfinite(loss):
-                raise ModelError(f"training diverged at iteration {it} (loss {float(loss)}); "
-                                 f"lower --lr (now {cfg.lr})")
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(params, 10.0)
-            opt.step()
-            it += 1
-            rec = {"iteration": it, "loss": loss.item(), "lr": cfg.lr * f,
-                   **{k: v.item() for k, v in losses.items()}}
-            history.append(rec)
-            if progress:
-                progress({**rec, "total": cfg.iterations, "elapsed_s": elapsed0 + time.monotonic() - t0})
-            if it - last_ckpt_it >= cfg.checkpoint_every:
-                _save_ckpt(ckpt_path, model, opt, it, cfg, elapsed0 + time.monotonic() - t0, history)
-                last_ckpt_it = it
-            if it >= cfg.iterations:
-                break
-            if budget_s and elapsed0 + time.monotonic() - t0 >= budget_s:
-                stopped = "max_minutes"
-                break
+    try:
+        if it < cfg.iterations:
+            stream = _mixed_batches if cfg.real else _batches
+            for images, targets in stream(ds, cfg, start_it):
+                elapsed = elapsed0 + time.monotonic() - t0
+                prog = it / cfg.iterations
+                if budget_s:
+                    prog = max(prog, elapsed / budget_s)
+                f = lr_factor(prog, it, cfg.warmup)
+                for g in opt.param_groups:
+                    g["lr"] = cfg.lr * f * g.get("lr_mult", 1.0)
+                images = [im.to(device) for im in images]
+                targets = [{k: v.to(device) for k, v in t.items()} for t in targets]
+                losses = model(images, targets)
+                loss = sum(losses.values())
+                if not torch.isfinite(loss):
+                    raise ModelError(f"training diverged at iteration {it} (loss {float(loss)}); "
+                                     f"lower --lr (now {cfg.lr})")
+                opt.zero_grad(set_to_none=True)
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(params, 10.0)
+                opt.step()
+                it += 1
+                rec = {"iteration": it, "loss": loss.item(), "lr": cfg.lr * f,
+                       **{k: v.item() for k, v in losses.items()}}
+                history.append(rec)
+                if progress:
+                    progress({**rec, "total": cfg.iterations, "elapsed_s": elapsed0 + time.monotonic() - t0})
+                if it - last_ckpt_it >= cfg.checkpoint_every:
+                    _save_ckpt(ckpt_path, model, opt, it, cfg, elapsed0 + time.monotonic() - t0, history)
+                    last_ckpt_it = it
+                if it >= cfg.iterations:
+                    break
+                if budget_s and elapsed0 + time.monotonic() - t0 >= budget_s:
+                    stopped = "max_minutes"
+                    break
+    except KeyboardInterrupt:  # Ctrl-C: the steps since the last checkpoint are kept
+        if it > last_ckpt_it:
+            _save_ckpt(ckpt_path, model, opt, it, cfg, elapsed0 + time.monotonic() - t0, history)
+        raise
+    except WtError as e:
+        raise _from_worker(e) from None
+
     elapsed = elapsed0 + time.monotonic() - t0
     backbone_in_bf16(model, False)  # the plain float32 backbone for the end-of-run check
     _save_ckpt(ckpt_path, model, opt, it, cfg, elapsed, history)
