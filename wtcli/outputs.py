@@ -15,7 +15,8 @@ import errno
 import os
 import re
 import tempfile
-from pathlib import Path
+import unicodedata
+from pathlib import Path, PurePosixPath
 from typing import Iterable
 
 from wtcli.errors import OutputError
@@ -127,3 +128,44 @@ def check_outputs(files: Iterable[str | Path | None] = (),
     for d in folders:
         if d is not None:
             writable_folder(d, "output folder")
+
+
+def _fold(name: str) -> str:
+    # How a macOS or Windows disk compares names: without case (and NFC, as macOS stores them).
+    return unicodedata.normalize("NFC", name).casefold()
+
+
+def _clashing(names: list[str]) -> set[int]:
+    seen: dict[str, list[int]] = {}
+    for k, n in enumerate(names):
+        seen.setdefault(_fold(n), []).append(k)
+    return {k for ks in seen.values() if len(ks) > 1 for k in ks}
+
+
+def distinct_names(paths: list[str], suffix: str = "") -> list[str]:
+    """One output name per input file (a relative posix path), so that no two overwrite each
+    other: the path without its extension, then ``suffix``; where two would meet (compared
+    without case, as macOS and Windows disks do) each keeps its extension (``dup.jpg`` and
+    ``dup.png``); names still alike get ``~2``, ``~3`` after all but the first in sorted order.
+    Decided from the whole set, not its order (a path given twice: numbered in input order).
+    ``segment``'s outputs and ``pitch``'s overlays are named so."""
+    parts = [PurePosixPath(p) for p in paths]
+
+    def named(k: int, stem: str) -> str:
+        return str(parts[k].parent / (stem + suffix)) if str(parts[k].parent) != "." \
+            else stem + suffix
+
+    names = [named(k, p.stem or p.name) for k, p in enumerate(parts)]
+    for _ in range(2):  # twice: a name given its extension may meet another's stem ("dup.jpg.png")
+        for k in _clashing(names):
+            names[k] = named(k, parts[k].name)
+    clash = _clashing(names)
+    taken = {_fold(n) for k, n in enumerate(names) if k not in clash}
+    for k in sorted(clash, key=lambda k: (names[k], k)):
+        cand, j = names[k], 1
+        while _fold(cand) in taken:
+            j += 1
+            cand = named(k, f"{parts[k].name}~{j}")
+        taken.add(_fold(cand))
+        names[k] = cand
+    return names

@@ -6,8 +6,7 @@ from __future__ import annotations
 
 import math
 import re
-import unicodedata
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 from typing import Callable
 
 import cv2
@@ -159,18 +158,6 @@ def _relative_parts(file_name: str) -> list[str]:
     return parts
 
 
-def _fold(name: str) -> str:
-    # How a macOS or Windows disk compares names: without case (and NFC, as macOS stores them).
-    return unicodedata.normalize("NFC", name).casefold()
-
-
-def _clashing(names: list[str]) -> set[int]:
-    seen: dict[str, list[int]] = {}
-    for k, n in enumerate(names):
-        seen.setdefault(_fold(n), []).append(k)
-    return {k for ks in seen.values() if len(ks) > 1 for k in ks}
-
-
 def overlay_names(images: list[dict]) -> list[str]:
     """The overlay file of each image record, relative to ``--overlay-dir``, one file per record.
 
@@ -182,26 +169,8 @@ def overlay_names(images: list[dict]) -> list[str]:
     ``a.jpg~2_pitch.png``), as ``segment`` names its outputs. Names are compared without case,
     as on macOS and Windows disks, and the names follow from the whole set, not its order
     (but for a name given twice, numbered in input order)."""
+    from wtcli.outputs import distinct_names
+
     parts = [_relative_parts(img.get("file_name") or "") or [f"image{img.get('id', k)}"]
              for k, img in enumerate(images)]
-
-    def named(k: int, stem: str) -> str:
-        return str(PurePosixPath(*parts[k][:-1], stem + OVERLAY_SUFFIX))
-
-    names = [named(k, PurePosixPath(p[-1]).stem or p[-1]) for k, p in enumerate(parts)]
-    # Twice: a name given its extension may meet another image's stem ("dup.jpg.png").
-    for _ in range(2):
-        for k in _clashing(names):
-            names[k] = named(k, parts[k][-1])
-    # Still alike (a name given twice, or names alike but for case): the first in sorted order
-    # keeps it, the others get ~2, ~3 after it, as segment names its outputs (output_names).
-    clash = _clashing(names)
-    taken = {_fold(n) for k, n in enumerate(names) if k not in clash}
-    for k in sorted(clash, key=lambda k: (names[k], k)):
-        cand, j = names[k], 1
-        while _fold(cand) in taken:
-            j += 1
-            cand = named(k, f"{parts[k][-1]}~{j}")
-        taken.add(_fold(cand))
-        names[k] = cand
-    return names
+    return distinct_names(["/".join(p) for p in parts], OVERLAY_SUFFIX)

@@ -151,21 +151,13 @@ def _walk(root: Path, out: Path | None) -> list[Path]:
 
 
 def output_names(rels: list[str]) -> dict[str, str]:
-    """Each photo's outputs' NAME: its path without the suffix, or with it where two photos
-    would share one (``dup.jpg`` and ``dup.png``; compared ignoring case, as disks on macOS and
-    Windows do), and a ``~2``, ``~3`` after names that differ only in case."""
-    stem = {r: str(Path(r).with_suffix("")) for r in rels}
-    groups: dict[str, list[str]] = {}
-    for r in rels:
-        groups.setdefault(stem[r].casefold(), []).append(r)
-    names = {r: (r if len(groups[stem[r].casefold()]) > 1 else stem[r]) for r in rels}
-    seen: dict[str, int] = {}
-    for r in sorted(rels):
-        key = names[r].casefold()
-        seen[key] = seen.get(key, 0) + 1
-        if seen[key] > 1:
-            names[r] = f"{names[r]}~{seen[key]}"
-    return names
+    """Each photo's outputs' NAME (``outputs.distinct_names``): its path without the suffix, or
+    with it where two photos would share one (``dup.jpg`` and ``dup.png``; compared ignoring
+    case, as disks on macOS and Windows do), and a ``~2``, ``~3`` after names that differ only
+    in case."""
+    from wtcli.outputs import distinct_names
+
+    return dict(zip(rels, distinct_names([Path(r).as_posix() for r in rels])))
 
 
 def output_paths(out: Path, rel: str, name: str = "") -> dict[str, Path]:
