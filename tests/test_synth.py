@@ -215,6 +215,53 @@ def test_cli_out_is_a_file(cli, tmp_path):
     assert r.exit_code == ExitCode.INPUT and "not a folder" in r.stderr
 
 
+def test_a_dataset_replaces_a_dataset_and_nothing_else(cli, tmp_path):
+    out = tmp_path / "ds"
+    args = ("--width", 64, "--height", 48, "--view", "front")
+    assert cli("synth", out, "-n", 3, "-s", 1, *args).exit_code == 0
+    (out / "images" / ".00001.jpg.abcd1234").write_bytes(b"half")  # a kill's temporary
+    r = cli("synth", out, "-n", 2, "-s", 2, *args)
+    assert r.exit_code == 0, r.stderr
+    # the old dataset's third image goes: the folder holds what its index lists
+    assert sorted(p.name for p in (out / "images").iterdir()) == ["00000.jpg", "00001.jpg"]
+    assert [img["file_name"] for img, _ in read_instances(out / "instances.json")] == [
+        "images/00000.jpg", "images/00001.jpg"]
+    for name, where in (("photo.JPG", "photo.JPG"), ("images/IMG_0001.jpg", "images/IMG_0001.jpg"),
+                        ("labels.csv", "labels.csv")):
+        folder = tmp_path / name.replace("/", "_")
+        (folder / name).parent.mkdir(parents=True)
+        (folder / name).write_bytes(b"someone's")
+        r = cli("synth", folder, "-n", 1, *args)
+        assert r.exit_code == ExitCode.INPUT and where in r.stderr, r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1
+        assert (folder / name).read_bytes() == b"someone's" and not (folder / "instances.json").exists()
+    coco = tmp_path / "coco"
+    (coco / "images").mkdir(parents=True)
+    (coco / "images" / "00000.jpg").write_bytes(b"a user's photo")
+    (coco / "instances.json").write_text('{"images": [], "annotations": [], "categories": []}')
+    r = cli("synth", coco, "-n", 1, *args)
+    assert r.exit_code == ExitCode.INPUT and "instances.json" in r.stderr
+    assert (coco / "images" / "00000.jpg").read_bytes() == b"a user's photo"
+
+
+def test_a_stopped_run_leaves_no_index_over_other_images(tmp_path, monkeypatch):
+    from wtcli.synth import render as render_mod
+
+    out = tmp_path / "ds"
+    render_dataset(out, 2, seed=1, width=64, height=48, view="front", progress=False)
+    calls = []
+
+    def stop(i):
+        calls.append(i)
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        render_mod.render_dataset(out, 2, seed=9, width=64, height=48, view="front",
+                                  progress=False, on_image=stop)
+    assert calls == [0] and not (out / "instances.json").exists()
+    assert not (out / "ground_truth.json").exists()
+
+
 @pytest.mark.parametrize("size", [(32, 32), (33, 47)])
 def test_tiny_images_render_cleanly(size):
     import warnings
@@ -441,7 +488,10 @@ def test_view_mix_shares_and_determinism():
     mixed = parse_view_mix("mixed=0.5,distant=0.5")
     assert mixed["distant"] == 0.5 and mixed["front"] == pytest.approx(0.21)
     for bad, words in (("", "at least one"), ("top", "'top'"), ("front=x", "number"),
-                       ("front=-1", "share"), ("front=0", "positive")):
+                       ("front=-1", "share"), ("front=0", "positive"),
+                       ("mixed=-1", "for mixed"), ("mixed=1e400", "for mixed"),
+                       ("nadir=nan", "for nadir"), ("front=1e300,hub=1e300", "share"),
+                       ({"hub": True}, "for hub")):
         with pytest.raises(ValueError, match=words):
             parse_view_mix(bad)
     mix = parse_view_mix("closeup=0.7,nadir=0.3")

@@ -13,16 +13,18 @@ angles counter-clockwise with y up, 0 = right; θ in [0, 180), φ hub -> tip in 
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 import cv2
 import numpy as np
 
 from wtcli.geometry import Camera, Mesh, Turbine
 from wtcli.geometry.projection import ProjectedMesh, paint, project_mesh
-from wtcli.jsonio import atomic_write_bytes, document, write_json
+from wtcli.errors import OutputError, WtError
+from wtcli.jsonio import atomic_write_bytes, document, read_json, write_failed, write_json
 from wtcli.masks import CATEGORIES, INSTANCES_SCHEMA, INSTANCES_VERSION, Instances
 from wtcli.pitch.angles import classify_theta
 from wtcli.synth import clutter
@@ -83,7 +85,8 @@ def _check_args(seed: int, width: int, height: int, view: str | None) -> None:
 def parse_view_mix(text: str | dict[str, float] | None) -> dict[str, float] | None:
     """A view mix as shares per view, normalised to sum to 1, from a mapping or a text:
     ``"front,closeup,nadir"`` (equal shares) or ``"front=0.5,closeup=0.3,nadir=0.2"`` (any
-    positive weights). ``"mixed"`` stands for the default mix (VIEW_ODDS). None -> None."""
+    weights in [0, 1e6], at least one positive). ``"mixed"`` stands for the default mix
+    (VIEW_ODDS). None -> None; ValueError naming the view for anything else."""
     from wtcli.synth.scene import VIEW_ODDS
 
     if text is None:
@@ -109,14 +112,16 @@ def parse_view_mix(text: str | dict[str, float] | None) -> dict[str, float] | No
         raise ValueError("expected at least one view in the view mix, got none")
     mix: dict[str, float] = {}
     for name, w in items:
+        if name != "mixed" and name not in ALL_VIEWS:
+            raise ValueError(f"expected views from {', '.join(ALL_VIEWS + ('mixed',))}, got {name!r}")
+        # bool is an int; a share above 1e6 is a typo, and a sum of huge ones overflows to inf
+        if isinstance(w, bool) or not (isinstance(w, (int, float)) and math.isfinite(w)
+                                       and 0 <= w <= 1e6):
+            raise ValueError(f"expected a share in [0, 1e6] for {name}, got {w!r}")
         if name == "mixed":
             for v, odds in VIEW_ODDS.items():
                 mix[v] = mix.get(v, 0.0) + float(w) * odds
             continue
-        if name not in ALL_VIEWS:
-            raise ValueError(f"expected views from {', '.join(ALL_VIEWS + ('mixed',))}, got {name!r}")
-        if not (isinstance(w, (int, float)) and math.isfinite(w) and w >= 0):
-            raise ValueError(f"expected a share >= 0 for {name}, got {w!r}")
         mix[name] = mix.get(name, 0.0) + float(w)
     total = sum(mix.values())
     if total <= 0:
@@ -694,6 +699,76 @@ def sample_seed(seed: int, index: int) -> int:
     return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1, np.uint32)[0])
 
 
+# What a dataset folder of render_dataset holds: images/NNNNN.jpg, the two index files, and the
+# ".NAME.XXXXXXXX" temporaries a kill between write and rename leaves (jsonio.atomic_write_bytes).
+_IMAGE_NAME = re.compile(r"^(\d{5,})\.jpg$")
+_INDEX_NAMES = ("instances.json", "ground_truth.json")
+_TEMP_OF = re.compile(r"^\.(.+)\.[a-z0-9_]{8}$")
+
+
+def _is_ours(name: str, names: Iterable[str] | re.Pattern) -> bool:
+    temp = _TEMP_OF.match(name)
+    name = temp.group(1) if temp else name
+    return bool(names.match(name)) if isinstance(names, re.Pattern) else name in names
+
+
+def _foreign(out: Path) -> str | None:
+    """The first entry of ``out`` that render_dataset did not write (None if all are its own):
+    a dataset is replaced, never a folder of someone's photos or labels."""
+    for p in sorted(out.iterdir()):
+        if p.name == "images" and p.is_dir() and not p.is_symlink():
+            for q in sorted(p.iterdir()):
+                if not (q.is_file() and _is_ours(q.name, _IMAGE_NAME)):
+                    return f"images/{q.name}"
+        elif not (p.is_file() and _is_ours(p.name, _INDEX_NAMES)):
+            return p.name
+    index = out / "instances.json"
+    if index.is_file():
+        try:
+            head = read_json(index)
+        except WtError:
+            return "instances.json"
+        if not (isinstance(head, dict) and head.get("schema") == INSTANCES_SCHEMA
+                and isinstance(head.get("synth"), dict)):
+            return "instances.json"
+    return None
+
+
+def _clear_previous(out: Path) -> None:
+    """Make ``out`` ready for a dataset: missing or empty, or holding one render_dataset wrote
+    (whose index files go first, so a run stopped half-way leaves no index over the old images).
+    OutputError (exit 3) for a folder holding anything else."""
+    if not out.exists():
+        return
+    if not out.is_dir():
+        raise OutputError(f"{out}: exists and is not a folder; choose another output folder")
+    try:
+        other = _foreign(out)
+        if other is not None:
+            raise OutputError(f"{out}: holds {other}, which synth did not write; a dataset "
+                              "replaces only a dataset: choose an empty or new folder")
+        for name in _INDEX_NAMES:
+            (out / name).unlink(missing_ok=True)
+    except OSError as e:
+        raise write_failed(out, e) from None
+
+
+def _remove_beyond(out: Path, count: int) -> None:
+    """Drop the images a previous, larger dataset left past ``count`` and any temporaries, so
+    the folder holds what its index lists."""
+    images = out / "images"
+    try:
+        for p in images.iterdir():
+            m = _IMAGE_NAME.match(p.name)
+            if (m is None or int(m.group(1)) >= count) and p.is_file():
+                p.unlink()
+        for p in out.iterdir():
+            if _TEMP_OF.match(p.name) and p.is_file():
+                p.unlink()
+    except OSError as e:
+        raise write_failed(out, e) from None
+
+
 def render_dataset(out_dir: str | Path, count: int, seed: int, width: int = 640,
                    height: int = 480, view: str | None = None, progress: bool = True,
                    on_image: Callable[[int], None] | None = None,
@@ -701,7 +776,8 @@ def render_dataset(out_dir: str | Path, count: int, seed: int, width: int = 640,
                    view_mix: str | dict[str, float] | None = None) -> dict[str, Any]:
     """Write ``count`` renders to ``out_dir``: images/NNNNN.jpg, instances.json (COCO-compatible,
     RLE masks) and ground_truth.json. Returns a summary dict. Existing files of the same names
-    are replaced; each file is written atomically. ``view_mix``: as for ``render_sample`` (its
+    are replaced; each file is written atomically. ``out_dir`` must be new, empty or a dataset
+    this function wrote (which is replaced: images past ``count`` removed); OutputError else. ``view_mix``: as for ``render_sample`` (its
     shares are recorded in the parameters; without it the files are as they always were)."""
     if count < 1:
         raise ValueError(f"expected count >= 1, got {count}")
@@ -712,6 +788,7 @@ def render_dataset(out_dir: str | Path, count: int, seed: int, width: int = 640,
     if mix is not None and view is not None:
         raise ValueError(f"expected a view or a view mix, got both ({view!r} and {view_mix!r})")
     out = Path(out_dir)
+    _clear_previous(out)
     # Annotations are RLE-encoded image by image (a dataset's masks would not fit in memory).
     images, anns, truth = [], [], {}
     views: dict[str, int] = {}
@@ -754,6 +831,7 @@ def render_dataset(out_dir: str | Path, count: int, seed: int, width: int = 640,
     write_json(out / "instances.json", document(INSTANCES_SCHEMA, INSTANCES_VERSION, body))
     write_json(out / "ground_truth.json",
                document(TRUTH_SCHEMA, TRUTH_VERSION, {"params": params, "images": truth}))
+    _remove_beyond(out, count)
     return {"out_dir": str(out), **params, "images": len(images), "instances": n_inst,
             "views": views, "files": {"instances": str(out / "instances.json"),
                                       "ground_truth": str(out / "ground_truth.json"),
