@@ -160,3 +160,41 @@ def test_annotations_of_no_image_are_refused_not_dropped(tmp_path):
     doc["annotations"][0]["image_id"] = 1
     p.write_text(_json.dumps(doc))
     assert len(read_instances(p)) == 1
+
+
+def test_a_checked_segmentation_draws_as_decoded_and_holds_no_mask():
+    from wtcli.masks import check_segmentation, decode_segmentation
+
+    m = np.zeros((300, 400), bool)
+    m[20:80, 30:300] = True
+    m[150:290, 10:20] = True
+    for seg in (rle_encode(m), polygons_encode(m)):
+        shape = check_segmentation(seg, 300, 400)
+        held = shape.runs.nbytes if shape.runs is not None else sum(p.nbytes for p in shape.polygons)
+        assert held < 0.05 * m.size  # a few kB against the 120 kB mask
+        assert np.array_equal(shape.mask(), decode_segmentation(seg, 300, 400))
+    with pytest.raises(ValueError, match=r"RLE size \[30, 40\] does not match the image 300x400"):
+        check_segmentation(rle_encode(m[:30, :40]), 300, 400)
+    with pytest.raises(ValueError, match="polygon 0"):
+        check_segmentation([[1, 2, 3]], 300, 400)
+
+
+def test_file_declared_size_reads_a_tiff_whose_tags_lie_past_the_first_mib(tmp_path):
+    import struct
+
+    from wtcli.masks import file_declared_size
+
+    far = 1 << 21  # the first page's tags at the end, as many writers put them
+    ifd = struct.pack("<H", 2) + b"".join(struct.pack("<HHII", tag, 4, 1, v)
+                                          for tag, v in ((256, 70000), (257, 50000))) + bytes(4)
+    p = tmp_path / "far.tif"
+    p.write_bytes(b"II*\0" + struct.pack("<I", far) + bytes(far - 8) + ifd)
+    with pytest.raises(InputError, match="70000x50000"):
+        file_declared_size(p)
+    png = tmp_path / "a.png"
+    import cv2
+
+    cv2.imwrite(str(png), np.zeros((37, 53), np.uint8))
+    assert file_declared_size(png) == (53, 37)
+    with pytest.raises(InputError, match="no-such.png"):
+        file_declared_size(tmp_path / "no-such.png")

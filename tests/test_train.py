@@ -602,3 +602,231 @@ def test_a_colour_mask_is_refused_not_read_as_background(tmp_path):
     grey[2:4], grey[5:7] = 1, 2  # class numbers stored as RGB: read as they are
     cv2.imwrite(str(tmp_path / "m.png"), grey)
     assert sorted(np.unique(read_pair(photo)[1]).tolist()) == [0, 1, 2]
+
+
+# ---- a user's own data: checked before training, drawn per draw, COCO semantics ------------
+def _coco(root, images, annotations, categories=None, write_images=True):
+    """A COCO folder: ``images`` as (file name, width, height), blank PNGs written for them."""
+    import cv2
+
+    (root / "images").mkdir(parents=True, exist_ok=True)
+    doc = {"images": [{"id": k + 1, "file_name": n, "width": w, "height": h}
+                      for k, (n, w, h) in enumerate(images)],
+           "annotations": [dict(a, id=k + 1) for k, a in enumerate(annotations)],
+           "categories": categories or [{"id": 1, "name": "blade"}, {"id": 2, "name": "tower"},
+                                        {"id": 3, "name": "nacelle"}]}
+    if write_images:
+        for n, w, h in images:
+            img = np.zeros((h, w, 3), np.uint8)
+            img[h // 4: h // 2, w // 4: w // 2] = 200
+            cv2.imwrite(str(root / "images" / n), img)
+    (root / "instances.json").write_text(json.dumps(doc))
+    return root
+
+
+def _square(x, y, s):
+    return [[x, y, x + s, y, x + s, y + s, x, y + s]]
+
+
+def test_coco_masks_are_drawn_when_drawn_not_held(tmp_path):
+    """Masks are drawn per item: making the dataset allocates nothing the size of an image
+    (all masks drawn up front took 2.3 GB for 10 photos of 5472 x 3648 with 8 polygons each)."""
+    import tracemalloc
+
+    from wtcli.masks import read_instances
+
+    w, h = 2000, 1500
+    anns = [{"image_id": i, "category_id": 1 + k % 3, "iscrowd": 0,
+             "segmentation": _square(100 + 200 * k, 100 + 100 * i, 150)} for i in (1, 2) for k in range(6)]
+    root = _coco(tmp_path / "ds", [("a.png", w, h), ("b.png", w, h)], anns)
+    tracemalloc.start()
+    try:
+        ds = D.CocoDataset(root, augment=False)
+        held = tracemalloc.get_traced_memory()[0]  # (the JSON reader's peak is its read buffer)
+    finally:
+        tracemalloc.stop()
+    assert held < 1e6, held  # 12 masks of 3 MB each, were they drawn
+    for k, (_, truth) in enumerate(read_instances(root / "instances.json")):
+        s = ds.load(k)
+        assert list(s.instances.labels) == list(truth.labels)
+        assert np.array_equal(s.instances.masks, truth.masks) and s.ignore is None
+
+
+def _png_header(path, w, h):
+    """A PNG of which only the header is whole: its size is read, never decoded."""
+    import struct
+    import zlib
+
+    ihdr = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + b"IHDR" + ihdr
+                     + struct.pack(">I", zlib.crc32(b"IHDR" + ihdr)))
+
+
+@pytest.mark.parametrize("case", ["missing", "other_size", "over_the_limit", "not_an_image"])
+def test_coco_image_problems_are_found_before_training(tmp_path, cli, monkeypatch, case):
+    import cv2
+
+    anns = [{"image_id": i, "category_id": 1, "segmentation": _square(10, 10, 30)} for i in (1, 2, 3)]
+    root = _coco(tmp_path / "ds", [("a.png", 96, 72), ("b.png", 96, 72), ("c.png", 96, 72)], anns)
+    bad = root / "images" / "c.png"
+    if case == "missing":
+        bad.unlink()
+        says = "'c.png' not found"
+    elif case == "other_size":
+        cv2.imwrite(str(bad), np.zeros((70, 96, 3), np.uint8))
+        says = "image is 96x70 but"
+    elif case == "over_the_limit":
+        _png_header(bad, 20_000, 20_000)
+        says = "20000x20000 is 400,000,000 pixels"
+    else:
+        bad.write_bytes(b"not an image at all")
+        says = "not a readable image"
+    if case != "not_an_image":  # a header that says it all: decoded by nothing
+        monkeypatch.setattr(cv2, "imread", lambda *a, **k: pytest.fail("decoded up front"))
+    with pytest.raises(InputError, match=says) as e:
+        D.CocoDataset(root, augment=False)
+    assert "c.png" in str(e.value)
+    monkeypatch.undo()
+    seen = []
+    with pytest.raises(InputError, match=says):
+        train(_tiny(tmp_path, data=str(root), train_sizes=(72,), eval_count=0), progress=seen.append)
+    assert not seen and not (tmp_path / "run" / "last.ckpt").exists()
+    res = cli("train", "--data", root, "--out", tmp_path / "r2", "--iterations", "1",
+              "--workers", "0", "--eval-count", "0")
+    assert res.exit_code == ExitCode.INPUT and "c.png" in res.stderr and says in res.stderr
+    assert res.stderr.count("\n") == 1  # one line
+
+
+def test_val_data_is_checked_before_training(tmp_path):
+    anns = [{"image_id": 1, "category_id": 1, "segmentation": _square(10, 10, 30)}]
+    root = _coco(tmp_path / "val", [("a.png", 96, 72)], anns)
+    (root / "images" / "a.png").unlink()
+    seen = []
+    with pytest.raises(InputError, match="a.png"):
+        train(_tiny(tmp_path, val=str(root), eval_count=1), progress=seen.append)
+    assert not seen and not (tmp_path / "run" / "last.ckpt").exists()
+
+
+def test_photo_exif_orientation_is_read_as_the_labels_were_drawn(tmp_path):
+    """A JPEG stored 40 x 30 that its EXIF says to turn a quarter: labels sized 40 x 30 were
+    drawn on the stored pixels, labels sized 30 x 40 on the turned photo; either is accepted."""
+    import struct
+
+    import cv2
+
+    img = np.zeros((30, 40, 3), np.uint8)
+    img[:, :10] = 255
+    jpg = cv2.imencode(".jpg", img)[1].tobytes()
+    tiff = (b"MM\0*" + struct.pack(">IH", 8, 1) + struct.pack(">HHIHH", 0x0112, 3, 1, 6, 0)
+            + struct.pack(">I", 0))
+    app1 = b"Exif\0\0" + tiff
+    for (w, h), name in (((40, 30), "stored"), ((30, 40), "turned")):
+        anns = [{"image_id": 1, "category_id": 1, "segmentation": _square(2, 2, 20)}]
+        root = _coco(tmp_path / name, [("a.jpg", w, h)], anns, write_images=False)
+        (root / "images" / "a.jpg").write_bytes(jpg[:2] + b"\xff\xe1" + struct.pack(">H", len(app1) + 2)
+                                                + app1 + jpg[2:])
+        s = D.CocoDataset(root, augment=False).load(0)
+        assert s.image.shape[:2] == (h, w), name
+        assert (s.image[:, :10] > 200).all() == (name == "stored")  # the stored pixels as stored
+
+
+def test_coco_semantics_crowd_boxes_other_categories_negatives(tmp_path, cli):
+    """Categories matched by name whatever their ids; other categories skipped and counted;
+    crowd regions and box-only annotations are ignore regions, neither instance nor
+    background; images without annotations are negatives."""
+    cats = [{"id": 7, "name": "Blade"}, {"id": 1, "name": "person"}, {"id": 2, "name": "tower"},
+            {"id": 3, "name": "nacelle"}, {"id": 4, "name": "car"}]
+    anns = [{"image_id": 1, "category_id": 7, "iscrowd": 0, "segmentation": _square(5, 5, 30)},
+            {"image_id": 1, "category_id": 2, "iscrowd": 1, "bbox": [50, 10, 20, 40],
+             "segmentation": {"counts": "compressed;text", "size": [72, 96]}},
+            {"image_id": 1, "category_id": 7, "segmentation": [], "bbox": [10, 50, 10, 10]},
+            {"image_id": 1, "category_id": 1, "segmentation": _square(80, 60, 5)},
+            {"image_id": 1, "category_id": 1, "segmentation": _square(80, 60, 5)},
+            {"image_id": 1, "category_id": 4, "segmentation": _square(80, 60, 5)}]
+    root = _coco(tmp_path / "ds", [("a.png", 96, 72), ("b.png", 96, 72)], anns, cats)
+    ds = D.CocoDataset(root, augment=False)
+    s = ds.load(0)
+    assert list(s.instances.labels) == ["blade"]
+    assert s.ignore[10:50, 50:70].all() and s.ignore[50:60, 10:20].all()
+    assert s.ignore.sum() == 20 * 40 + 10 * 10
+    _, t = D.to_target(s)
+    assert t["labels"].tolist() == [1] and t["ignore_boxes"].shape == (2, 4)
+    neg = ds.load(1)
+    assert len(neg.instances) == 0 and neg.ignore is None
+    note, = ds.notes()
+    for says in ("1 instance(s) in 2 image(s)", "1 image(s) with no instance (negatives: all background)",
+                 "3 of categories not trained (person 2, car 1)", "1 crowd region(s)",
+                 "1 box(es) without a mask"):
+        assert says in note, note
+    res = cli("train", "--data", root, "--out", tmp_path / "r", "--iterations", "1", "--width", "96",
+              "--height", "72", "--sizes", "72", "--workers", "0", "--eval-count", "0")
+    assert res.exit_code == 0, res.stderr
+    assert res.stderr.count("ignored 3 of categories not trained") == 1
+    # Nothing left to train as an instance: refused, saying what there was.
+    only = _coco(tmp_path / "only", [("a.png", 96, 72)], anns[1:], cats)
+    with pytest.raises(InputError, match=r"no annotation to train on.*person 2, car 1.*1 crowd"):
+        D.CocoDataset(only)
+    with pytest.raises(InputError, match="no category is blade, tower or nacelle"):
+        D.CocoDataset(_coco(tmp_path / "none", [("a.png", 96, 72)], anns[3:4],
+                            [{"id": 1, "name": "person"}]))
+    bad = _coco(tmp_path / "bad", [("a.png", 96, 72)], [dict(anns[0], category_id=9)], cats)
+    with pytest.raises(InputError, match=r"annotations\[0\]: category_id: expected one of the "
+                                         r"categories' ids \[1, 2, 3, 4, 7\], got 9"):
+        D.CocoDataset(bad)
+
+
+def test_real_photo_problems_are_found_before_training(tmp_path):
+    import cv2
+
+    for case, says in (("values", r"expected classes 0, 1 \(blade\), 2 \(tower\), found \[7\]"),
+                       ("size", "mask is 320x240 but its photo"),
+                       ("huge", "20000x20000 is 400,000,000 pixels")):
+        root = _photo_folder(tmp_path / case)
+        mask, photo = root / "masks" / "s_03.png", root / "images" / "s_03.jpg"
+        if case == "values":
+            sem = cv2.imread(str(mask), cv2.IMREAD_UNCHANGED)
+            sem[0, 0] = 7
+            cv2.imwrite(str(mask), sem)
+        elif case == "size":
+            cv2.imwrite(str(photo), np.zeros((200, 320, 3), np.uint8))
+        else:
+            photo = photo.with_suffix(".png")
+            _png_header(photo, 20_000, 20_000)
+            man = root / "manifest.csv"
+            man.write_text(man.read_text().replace("s_03.jpg", "s_03.png"))
+        with pytest.raises(InputError, match=says) as e:
+            D.RealDataset(root, augment=False)
+        assert ("s_03.png" if case != "size" else "s_03.jpg") in str(e.value)
+
+
+def test_manifest_with_a_bom_and_capitalised_columns_is_read(tmp_path):
+    from wtcli.segment.real import read_folder
+
+    root = _photo_folder(tmp_path / "p", n=2)
+    man = root / "manifest.csv"
+    text = man.read_text()
+    man.write_text("\ufeff" + text.replace("image,mask,site,view", "Image, MASK ,Site,View"),
+                   encoding="utf-8")
+    photos = read_folder(root)
+    assert [p.name for p in photos] == ["s_01", "s_02"] and photos[0].view == "front"
+    man.write_text("Image,Mask,image\n" + "\n".join(text.splitlines()[1:]))
+    with pytest.raises(InputError, match="column 'image' given twice"):
+        read_folder(root)
+    man.write_text("picture;mask\n" + "\n".join(text.splitlines()[1:]))
+    with pytest.raises(InputError, match=r"missing image and mask \(it has 'picture;mask'\)"):
+        read_folder(root)
+    man.write_text("image,mask\nimages/s_01.jpg\n")
+    with pytest.raises(InputError, match="line 2: no mask given"):
+        read_folder(root)
+
+
+@pytest.mark.parametrize("mix", ["mixed=-1", "mixed=-1,front=2", "mixed=1e400", "mixed=nan",
+                                 "front=inf,mixed=1"])
+def test_cli_view_mix_shares_out_of_range(cli, tmp_path, mix):
+    """A bad option value: exit 4, as every other (``mixed=-1,front=2`` once trained on front
+    views alone, ``mixed=1e400`` ended in exit 1)."""
+    res = cli("train", "--view-mix", mix, "--out", tmp_path / "r")
+    name = mix.split(",")[0].split("=")[0]
+    assert res.exit_code == ExitCode.CONFIG, res.stderr
+    assert f"--view-mix: expected a share in [0, 1e6] for {name}" in res.stderr
+    assert res.stderr.count("\n") == 1 and not (tmp_path / "r").exists()

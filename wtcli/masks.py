@@ -47,7 +47,8 @@ def rle_encode(mask: np.ndarray) -> dict[str, Any]:
     return {"counts": counts, "size": [int(mask.shape[0]), int(mask.shape[1])]}
 
 
-def rle_decode(rle: dict[str, Any]) -> np.ndarray:
+def _rle_counts(rle: dict[str, Any]) -> tuple[int, int, np.ndarray]:
+    """(H, W, run lengths) of an uncompressed RLE, checked without expanding it."""
     size = rle["size"]
     if not isinstance(size, list) or len(size) != 2:
         raise ValueError(f"RLE size: expected [H, W], got {shown(size)}")
@@ -62,12 +63,20 @@ def rle_decode(rle: dict[str, Any]) -> np.ndarray:
     for i, c in enumerate(counts):
         if isinstance(c, bool) or not isinstance(c, int) or not 0 <= c <= h * w:
             raise ValueError(f"RLE counts[{i}]: expected an integer in [0, {h * w}], got {shown(c)}")
-    counts = np.asarray(counts, dtype=np.int64)
-    if counts.sum() != h * w:
-        raise ValueError(f"RLE counts sum to {int(counts.sum())}, expected {h * w} (= H*W)")
-    values = np.arange(len(counts)) % 2 == 1
-    flat = np.repeat(values, counts)
-    return flat.reshape((h, w), order="F")
+    runs = np.asarray(counts, dtype=np.int64)
+    if runs.sum() != h * w:
+        raise ValueError(f"RLE counts sum to {int(runs.sum())}, expected {h * w} (= H*W)")
+    return h, w, runs.astype(np.int32)  # each <= MAX_IMAGE_PIXELS: half the memory of int64
+
+
+def _draw_rle(runs: np.ndarray, h: int, w: int) -> np.ndarray:
+    values = np.arange(len(runs)) % 2 == 1
+    return np.repeat(values, runs).reshape((h, w), order="F")
+
+
+def rle_decode(rle: dict[str, Any]) -> np.ndarray:
+    h, w, runs = _rle_counts(rle)
+    return _draw_rle(runs, h, w)
 
 
 def polygons_encode(mask: np.ndarray, epsilon: float = 0.0) -> list[list[float]]:
@@ -82,8 +91,10 @@ def polygons_encode(mask: np.ndarray, epsilon: float = 0.0) -> list[list[float]]
     return polys
 
 
-def polygons_decode(polys: list[list[float]], h: int, w: int) -> np.ndarray:
-    canvas = np.zeros((h, w), np.uint8)
+def _polygon_points(polys: list[list[float]], h: int, w: int) -> tuple[np.ndarray, ...]:
+    """Polygons checked against an image of h x w: int32 (n, 2) points in 1/16 px, as
+    ``cv2.fillPoly(..., shift=4)`` draws them."""
+    out = []
     for k, p in enumerate(polys):
         if not isinstance(p, list) or len(p) < 6 or len(p) % 2:
             raise ValueError(f"polygon {k}: needs >= 3 (x, y) points, got {shown(p)}")
@@ -95,20 +106,64 @@ def polygons_decode(polys: list[list[float]], h: int, w: int) -> np.ndarray:
                     or not -lim <= v <= 2 * lim:
                 raise ValueError(f"polygon {k}[{i}]: expected a coordinate in [{-lim}, {2 * lim}] "
                                  f"(the image is {w}x{h}), got {shown(v)}")
-        pts = np.round(np.asarray(p, float).reshape(-1, 2) * 16).astype(np.int32)
+        out.append(np.round(np.asarray(p, float).reshape(-1, 2) * 16).astype(np.int32))
+    return tuple(out)
+
+
+def _draw_polygons(points: tuple[np.ndarray, ...], h: int, w: int) -> np.ndarray:
+    canvas = np.zeros((h, w), np.uint8)
+    for pts in points:
         cv2.fillPoly(canvas, [pts], 1, shift=4)
     return canvas.astype(bool)
 
 
-def decode_segmentation(seg: Any, h: int, w: int) -> np.ndarray:
+def polygons_decode(polys: list[list[float]], h: int, w: int) -> np.ndarray:
+    return _draw_polygons(_polygon_points(polys, h, w), h, w)
+
+
+@dataclass(frozen=True, eq=False)
+class Shape:
+    """One annotation's segmentation, checked against its image but not drawn: an RLE's run
+    lengths or polygons' points, a few kB where the drawn mask [H, W] is H*W bytes. ``mask()``
+    draws it."""
+
+    height: int
+    width: int
+    runs: np.ndarray | None = None  # uncompressed RLE run lengths, int32, background first
+    polygons: tuple[np.ndarray, ...] = ()  # int32 (n, 2) points in 1/16 px
+
+    def mask(self) -> np.ndarray:
+        """bool [H, W]."""
+        if self.runs is not None:
+            return _draw_rle(self.runs, self.height, self.width)
+        return _draw_polygons(self.polygons, self.height, self.width)
+
+
+def check_segmentation(seg: Any, h: int, w: int) -> Shape:
+    """A COCO segmentation (uncompressed RLE or polygons) checked for an image of h x w,
+    without drawing it; ValueError (or KeyError for a missing RLE key) says what is wrong."""
     if isinstance(seg, dict):
-        m = rle_decode(seg)
-        if m.shape != (h, w):
-            raise ValueError(f"RLE size {list(m.shape)} does not match the image {h}x{w}")
-        return m
+        rh, rw, runs = _rle_counts(seg)
+        if (rh, rw) != (h, w):
+            raise ValueError(f"RLE size {[rh, rw]} does not match the image {h}x{w}")
+        return Shape(h, w, runs=runs)
     if isinstance(seg, list):
-        return polygons_decode(seg, h, w)
+        return Shape(h, w, polygons=_polygon_points(seg, h, w))
     raise ValueError(f"segmentation must be RLE (dict) or polygons (list), got {type(seg).__name__}")
+
+
+def decode_segmentation(seg: Any, h: int, w: int) -> np.ndarray:
+    return check_segmentation(seg, h, w).mask()
+
+
+def check_bbox(box: Any, h: int, w: int) -> list[float]:
+    """A COCO bbox [x, y, width, height] checked for an image of h x w -> xyxy (ValueError or
+    InputError naming ``bbox``)."""
+    if not isinstance(box, list) or len(box) != 4:
+        raise ValueError(f"bbox: expected [x, y, width, height], got {shown(box)}")
+    x, y = (number(v, "bbox", -w, 2 * w if i == 0 else 2 * h) for i, v in enumerate(box[:2]))
+    bw, bh = (number(v, "bbox width/height", 0, 3 * max(h, w)) for v in box[2:])
+    return [x, y, x + bw, y + bh]
 
 
 def check_size(value: Any, where: str) -> int:
@@ -215,6 +270,58 @@ def check_declared_size(data: np.ndarray, path: str | Path) -> None:
                          "docs/exit-codes.md); downscale it first")
 
 
+HEADER_BYTES = 1 << 20  # what ``declared_size`` looks at: far past any header's size fields
+
+
+def file_declared_size(path: str | Path) -> tuple[int, int] | None:
+    """(width, height) the image file at ``path`` declares in its header (``declared_size``),
+    read without decoding it: its first MiB, or a TIFF's whole file when the tags of its first
+    page lie further on. InputError naming ``path`` when it cannot be read or declares more than
+    MAX_IMAGE_PIXELS; None when the header does not tell (the decoder then decides)."""
+    path = Path(path)
+    try:
+        with path.open("rb") as f:
+            head = np.frombuffer(f.read(HEADER_BYTES), np.uint8)
+            size = declared_size(head)
+            if size is None and head[:4].tobytes() in (b"II*\0", b"MM\0*", b"II+\0", b"MM\0+"):
+                f.seek(0)
+                head = np.frombuffer(f.read(), np.uint8)
+                size = declared_size(head)
+    except OSError as e:
+        raise InputError(f"{path}: unreadable ({e.strerror or e.__class__.__name__})") from None
+    check_declared_size(head, path)
+    return size
+
+
+def read_labelled_image(path: str | Path, size: tuple[int, int] | None = None,
+               flags: int = cv2.IMREAD_COLOR) -> np.ndarray | None:
+    """The image at ``path`` decoded (``cv2.imread``; None if it cannot be), refused from its
+    header first when over MAX_IMAGE_PIXELS. OpenCV turns a JPEG by its EXIF orientation; with
+    ``size`` (H, W) the size its labels were drawn at, a photo turned a quarter away from that
+    size is read as stored instead: the labels were drawn on the stored pixels."""
+    file_declared_size(path)
+    img = cv2.imread(str(path), flags)
+    if img is not None and size is not None and img.shape[:2] != tuple(size) \
+            and img.shape[:2] == tuple(size)[::-1]:
+        stored = cv2.imread(str(path), flags | cv2.IMREAD_IGNORE_ORIENTATION)
+        if stored is not None and stored.shape[:2] == tuple(size):
+            return stored
+    return img
+
+
+def image_size_as_read(path: str | Path, size: tuple[int, int]) -> tuple[int, int] | None:
+    """(H, W) ``read_labelled_image(path, size)`` will give, from the header where that tells it (the
+    stored size is ``size``, or differs from it other than by a quarter turn), otherwise by
+    decoding it once; None if it cannot be decoded. InputError as ``file_declared_size``."""
+    declared = file_declared_size(path)
+    if declared is not None:
+        stored = (declared[1], declared[0])
+        if stored == tuple(size) or stored[::-1] != tuple(size):
+            return stored
+    img = read_labelled_image(path, size)  # no header read, or turned: only the decoder knows
+    return None if img is None else (int(img.shape[0]), int(img.shape[1]))
+
+
 def mask_box(mask: np.ndarray) -> np.ndarray:
     ys, xs = np.nonzero(mask)
     if len(xs) == 0:
@@ -311,11 +418,7 @@ class Instances:
                 score = number(a.get("score", 1.0), "score", 0.0, 1.0)
                 box = a.get("bbox")
                 if box is not None:
-                    if not isinstance(box, list) or len(box) != 4:
-                        raise ValueError(f"bbox: expected [x, y, width, height], got {shown(box)}")
-                    x, y = (number(v, "bbox", -w, 2 * w if i == 0 else 2 * h)
-                            for i, v in enumerate(box[:2]))
-                    bw, bh = (number(v, "bbox width/height", 0, 3 * max(h, w)) for v in box[2:])
+                    box = check_bbox(box, h, w)
                 m = decode_segmentation(a["segmentation"], h, w)
             except KeyError as e:
                 raise InputError(f"{at}: missing key {e.args[0]!r}") from None
@@ -326,7 +429,7 @@ class Instances:
             labels.append(LABELS[cid - 1])
             masks.append(m)
             scores.append(score)
-            boxes.append([x, y, x + bw, y + bh] if box is not None else mask_box(m).tolist())
+            boxes.append(box if box is not None else mask_box(m).tolist())
         if not labels:
             return cls.empty(h, w)
         return cls(np.array(labels, dtype=object), np.stack(masks), np.array(scores), np.array(boxes))
@@ -350,19 +453,23 @@ def write_instances(path: str | Path, images: list[dict], per_image: list[Instan
     return write_json(path, instances_document(images, per_image, encoding, extra))
 
 
-def read_instances(path: str | Path) -> list[tuple[dict, Instances]]:
-    """Read a COCO instances file (ours, or any COCO-compatible one with our category names)."""
+def read_coco_document(path: str | Path) -> dict:
+    """A COCO instances file's document (ours, or any COCO-compatible one), its top-level
+    lists checked; ``categories`` defaults to ours."""
     path = Path(path)
     doc = read_json(path, INSTANCES_SCHEMA, INSTANCES_VERSION, header_required=False)
-    if not isinstance(doc.get("images"), list) or not isinstance(doc.get("annotations"), list):
+    if not isinstance(doc, dict) or not isinstance(doc.get("images"), list) \
+            or not isinstance(doc.get("annotations"), list):
         raise InputError(f"{path}: expected a COCO instances JSON with 'images' and 'annotations' lists")
-    categories = doc.get("categories", CATEGORIES)
+    categories = doc.setdefault("categories", CATEGORIES)
     if not isinstance(categories, list) or not all(isinstance(c, dict) for c in categories):
         raise InputError(f"{path}: categories: expected a list of objects, got {shown(categories)}")
-    cats = {c.get("id"): c.get("name") for c in categories}
-    if any(cats.get(i + 1) != n for i, n in enumerate(LABELS)):
-        raise InputError(f"{path}: categories must be {[c['name'] for c in CATEGORIES]} with ids 1..3, "
-                         f"got {shown(list(cats.items()))}")
+    return doc
+
+
+def coco_images(path: str | Path, doc: dict) -> list[tuple[dict, int, int, list[dict]]]:
+    """(image entry, H, W, its annotations) per image of a ``read_coco_document``, sizes and
+    ids checked, the annotations not yet."""
     by_image: dict[int, list[dict]] = {}
     for a in doc["annotations"]:
         if not isinstance(a, dict) or isinstance(a.get("image_id"), bool) \
@@ -394,6 +501,18 @@ def read_instances(path: str | Path) -> list[tuple[dict, Instances]]:
                                      f"characters), got {shown(v)}")
         except (TypeError, ValueError) as e:
             raise InputError(f"{path}: images[{i}].{e}") from None
-        out.append((img, Instances.from_annotations(by_image.get(iid, []), h, w,
-                                                    where=f"{path}: image {shown(iid)} ")))
+        out.append((img, h, w, by_image.get(iid, [])))
     return out
+
+
+def read_instances(path: str | Path) -> list[tuple[dict, Instances]]:
+    """Read a COCO instances file (ours, or any COCO-compatible one with our category names
+    and ids), every mask drawn."""
+    path = Path(path)
+    doc = read_coco_document(path)
+    cats = {c.get("id"): c.get("name") for c in doc["categories"]}
+    if any(cats.get(i + 1) != n for i, n in enumerate(LABELS)):
+        raise InputError(f"{path}: categories must be {[c['name'] for c in CATEGORIES]} with ids 1..3, "
+                         f"got {shown(list(cats.items()))}")
+    return [(img, Instances.from_annotations(anns, h, w, where=f"{path}: image {shown(img['id'])} "))
+            for img, h, w, anns in coco_images(path, doc)]

@@ -121,7 +121,8 @@ def train(
                       real_holdout=tuple(real_holdout or ()))
     report = _Report(iterations, max_minutes, checkpoint_every)
     try:
-        summary = run_training(cfg, progress=report.step)
+        summary = run_training(cfg, progress=report.step,
+                               note=lambda line: err_console.print(f"train: {line}", soft_wrap=True))
     finally:
         report.close()
     ev = summary.get("evaluation") or {}

@@ -10,15 +10,19 @@ torchvision's Mask R-CNN trains on.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
 import torch
 
 from wtcli.errors import InputError
-from wtcli.masks import LABELS, Instances, read_instances
+from wtcli.jsonio import number, shown
+from wtcli.masks import (LABELS, Instances, Shape, check_bbox, check_segmentation, coco_images,
+                         image_size_as_read, mask_box, read_coco_document, read_labelled_image)
 
 TRAIN_SEED_BASE = 1_000_000  # synthetic training scenes use seeds TRAIN_SEED_BASE + i
 DEV_SEED_BASE = 7_000_000  # development probes (choosing thresholds); never trained on
@@ -95,40 +99,180 @@ class SynthDataset(torch.utils.data.Dataset):
         return to_target(s)
 
 
+@dataclass(frozen=True)
+class CocoImage:
+    """One image of a COCO file as training reads it: its annotations checked, not drawn
+    (``CocoDataset.load`` draws them when the image is drawn), so memory holds the annotations
+    and nothing the size of the image."""
+
+    height: int
+    width: int
+    labels: tuple[str, ...]
+    shapes: tuple[Shape, ...]  # the instances' segmentations, one per label
+    # Crowd regions and annotations with a box but no mask: their box (xyxy), or a crowd
+    # region's shape where it has no bbox. Trained as neither instance nor background.
+    ignore: tuple[list[float] | Shape, ...] = ()
+
+
+@dataclass
+class CocoCounts:
+    """What reading a COCO file for training left out of the instances (``notes``)."""
+
+    crowd: int = 0  # iscrowd 1: ignore regions
+    box_only: int = 0  # a bbox, no segmentation: ignore regions
+    empty: int = 0  # neither a segmentation nor a bbox: nothing to use
+    other: dict[str, int] = field(default_factory=dict)  # category name -> annotations skipped
+    negatives: int = 0  # images with no instance: trained as background
+    instances: int = 0
+
+
+def read_training_coco(path: str | Path) -> tuple[list[tuple[dict, CocoImage]], CocoCounts]:
+    """A COCO instances file as training data (docs/train.md, "Your own COCO data"): categories
+    matched by name (blade, tower, nacelle in any case, whatever their ids); annotations of
+    other categories skipped (background, as anything else in the photo); ``iscrowd`` 1 regions
+    and box-only annotations kept as ignore regions. InputError when nothing is left to train
+    on as an instance."""
+    path = Path(path)
+    doc = read_coco_document(path)
+    names: dict[Any, str] = {}
+    for k, c in enumerate(doc["categories"]):
+        cid, name = c.get("id"), c.get("name")
+        if isinstance(cid, bool) or not isinstance(cid, (int, str)) or not isinstance(name, str):
+            raise InputError(f"{path}: categories[{k}]: expected an integer 'id' and a text "
+                             f"'name', got {shown(c)}")
+        if names.get(cid, name) != name:
+            raise InputError(f"{path}: categories[{k}]: id {shown(cid)} is also "
+                             f"{shown(names[cid])}")
+        names[cid] = name
+    trained = {cid: n.strip().lower() for cid, n in names.items() if n.strip().lower() in LABELS}
+    if not trained:
+        raise InputError(f"{path}: no category is blade, tower or nacelle (its categories: "
+                         f"{shown(', '.join(names.values()))})")
+    counts = CocoCounts()
+    items = []
+    for img, h, w, anns in coco_images(path, doc):
+        labels, shapes, ignore = [], [], []
+        for j, a in enumerate(anns):
+            at = f"{path}: image {shown(img['id'])} annotations[{j}]"
+            try:
+                cid = a["category_id"]
+                if isinstance(cid, bool) or not isinstance(cid, (int, str)) or cid not in names:
+                    raise ValueError(f"category_id: expected one of the categories' ids "
+                                     f"{shown(sorted(names, key=str))}, got {shown(cid)}")
+                if cid not in trained:
+                    counts.other[names[cid]] = counts.other.get(names[cid], 0) + 1
+                    continue
+                crowd = number(a.get("iscrowd", 0), "iscrowd", 0, 1, integer=True)
+                box = check_bbox(a["bbox"], h, w) if a.get("bbox") is not None else None
+                seg = a.get("segmentation")
+                if crowd:  # only its extent is used: a compressed RLE with a bbox is fine
+                    ignore.append(box if box is not None else check_segmentation(seg, h, w))
+                    counts.crowd += 1
+                elif seg is None or seg == []:
+                    if box is None:
+                        counts.empty += 1
+                    else:
+                        ignore.append(box)
+                        counts.box_only += 1
+                else:
+                    number(a.get("score", 1.0), "score", 0.0, 1.0)
+                    shapes.append(check_segmentation(seg, h, w))
+                    labels.append(trained[cid])
+            except KeyError as e:
+                raise InputError(f"{at}: missing key {e.args[0]!r}") from None
+            except (TypeError, ValueError) as e:
+                raise InputError(f"{at}: {e}") from None
+            except InputError as e:
+                raise InputError(f"{at}.{e}") from None
+        counts.instances += len(labels)
+        counts.negatives += not labels
+        items.append((img, CocoImage(h, w, tuple(labels), tuple(shapes), tuple(ignore))))
+    if not items:
+        raise InputError(f"{path}: the dataset has no images")
+    if not counts.instances:
+        raise InputError(f"{path}: no annotation to train on: none of its {len(doc['annotations'])} "
+                         f"is a blade, tower or nacelle mask ({_left_out(counts) or 'no annotations'})")
+    return items, counts
+
+
+def _left_out(c: CocoCounts) -> str:
+    parts = []
+    if c.other:
+        cats = ", ".join(f"{n} {k}" for n, k in sorted(c.other.items(), key=lambda t: (-t[1], t[0])))
+        parts.append(f"{sum(c.other.values())} of categories not trained ({cats})")
+    if c.crowd:
+        parts.append(f"{c.crowd} crowd region(s) (iscrowd 1)")
+    if c.box_only:
+        parts.append(f"{c.box_only} box(es) without a mask")
+    if c.empty:
+        parts.append(f"{c.empty} with neither a mask nor a box")
+    return "; ".join(parts)
+
+
 class CocoDataset(torch.utils.data.Dataset):
-    """A COCO instances JSON with our three category names; image files next to it, in
-    ``images/``, or at their ``file_name`` path."""
+    """A COCO instances JSON (``read_training_coco``); image files next to it, in ``images/``,
+    or at their ``file_name`` path. Every image is found and its size checked against the file
+    when the dataset is made (from its header where that tells it), so a run stops before it
+    trains rather than when it first draws a bad one; masks are drawn per draw."""
 
     def __init__(self, path: str | Path, augment: bool = True, aug_seed: int = 0):
         path = Path(path)
         if path.is_dir():
             path = path / "instances.json"
         self.path, self.root = path, path.parent
-        self.items = read_instances(path)
-        if not self.items:
-            raise InputError(f"{path}: the dataset has no images")
+        self.items, self.counts = read_training_coco(path)
+        for info, im in self.items:
+            p = self.image_path(info)
+            got = image_size_as_read(p, (im.height, im.width))
+            if got is None:
+                raise InputError(f"{p}: not a readable image")
+            if got != (im.height, im.width):
+                raise InputError(f"{p}: image is {got[1]}x{got[0]} but {self.path} says "
+                                 f"{im.width}x{im.height} (image {info.get('id')!r})")
         self.augment, self.aug_seed, self.epoch = augment, int(aug_seed), 0
 
     def __len__(self) -> int:
         return len(self.items)
 
+    def notes(self) -> list[str]:
+        """What the file holds beyond its instances, in a line, when anything (for the user)."""
+        c = self.counts
+        parts = [f"{c.instances} instance(s) in {len(self.items)} image(s)"]
+        if c.negatives:
+            parts.append(f"{c.negatives} image(s) with no instance (negatives: all background)")
+        left = _left_out(c)
+        if left:
+            parts.append(f"ignored {left}")
+        return [f"{self.path}: " + "; ".join(parts)] if c.negatives or left else []
+
     def image_path(self, info: dict) -> Path:
         name = str(info.get("file_name", ""))
         for cand in (self.root / name, self.root / "images" / name, Path(name)):
-            if cand.is_file():
+            if name and cand.is_file():
                 return cand
         raise InputError(f"{self.path}: image {name!r} not found next to it or in images/")
 
     def load(self, i: int) -> Sample:
-        info, inst = self.items[i]
+        info, im = self.items[i]
         p = self.image_path(info)
-        img = cv2.imread(str(p), cv2.IMREAD_COLOR)
+        img = read_labelled_image(p, (im.height, im.width))
         if img is None:
             raise InputError(f"{p}: not a readable image")
-        if img.shape[:2] != inst.image_size:
+        if img.shape[:2] != (im.height, im.width):
             raise InputError(f"{p}: image is {img.shape[1]}x{img.shape[0]} but its annotations "
-                             f"say {inst.image_size[1]}x{inst.image_size[0]}")
-        return Sample(img, inst)
+                             f"say {im.width}x{im.height}")
+        ignore = None
+        if im.ignore:
+            ignore = np.zeros((im.height, im.width), bool)
+            for region in im.ignore:
+                x0, y0, x1, y1 = mask_box(region.mask()) if isinstance(region, Shape) else region
+                ignore[max(0, math.floor(y0)): max(0, math.ceil(y1)),
+                       max(0, math.floor(x0)): max(0, math.ceil(x1))] = True
+            ignore = ignore if ignore.any() else None
+        if not im.labels:
+            return Sample(img, Instances.empty(im.height, im.width), ignore)
+        masks = np.stack([s.mask() for s in im.shapes])
+        return Sample(img, Instances(np.array(im.labels, dtype=object), masks), ignore)
 
     def __getitem__(self, i: int):
         s = self.load(i)
@@ -153,6 +297,8 @@ class RealDataset(torch.utils.data.Dataset):
         self.coco: CocoDataset | None = None
         if R.is_photo_folder(self.path):
             self.photos = R.read_folder(self.path)
+            for photo in self.photos:  # now, not when first drawn: minutes into a run
+                R.check_photo(photo)
             seqs = [p.sequence for p in self.photos]
         else:
             if not self.path.exists():
@@ -178,6 +324,9 @@ class RealDataset(torch.utils.data.Dataset):
 
     def __len__(self) -> int:
         return len(self.keep)
+
+    def notes(self) -> list[str]:
+        return self.coco.notes() if self.coco is not None else []
 
     def load(self, i: int) -> Sample:
         k = self.keep[i]

@@ -45,7 +45,7 @@ import cv2
 import numpy as np
 
 from wtcli.errors import InputError
-from wtcli.masks import Instances
+from wtcli.masks import Instances, image_size_as_read, read_labelled_image
 
 BLADE, TOWER = 1, 2  # classes of the semantic masks
 VIEW_TYPES = ("close-up", "nadir", "side", "front", "front-oblique", "rear", "rear-oblique",
@@ -115,66 +115,113 @@ def is_photo_folder(path: str | Path) -> bool:
     return p.is_dir() and (p / "manifest.csv").is_file()
 
 
+MANIFEST_COLUMNS = ("image", "mask")  # required; view, view_type and sequence are optional
+
+
+def read_manifest(man: Path) -> list[dict[str, str]]:
+    """The rows of ``manifest.csv`` as {column: text}, column names as written but trimmed and
+    in lower case (``Image`` is ``image``); a UTF-8 byte-order mark (Excel's "CSV UTF-8")
+    is skipped."""
+    try:
+        with man.open(encoding="utf-8-sig", newline="") as f:
+            table = list(csv.reader(f))
+    except (OSError, UnicodeDecodeError, csv.Error) as e:
+        raise InputError(f"{man}: unreadable ({e.__class__.__name__})") from None
+    if not table:
+        raise InputError(f"{man}: empty; expected a header line with columns image, mask")
+    header = [c.strip().lower() for c in table[0]]
+    twice = sorted({c for c in header if c and header.count(c) > 1})
+    if twice:
+        raise InputError(f"{man}: column {twice[0]!r} given twice in the header line "
+                         f"({', '.join(table[0])})")
+    missing = [c for c in MANIFEST_COLUMNS if c not in header]
+    if missing:
+        got = ", ".join(repr(c) for c in table[0][:8]) or "nothing"
+        raise InputError(f"{man}: expected columns image and mask in the header line, missing "
+                         f"{' and '.join(missing)} (it has {got})")
+    width = len(header)  # a short row's missing cells read as empty
+    rows = [dict(zip(header, [v.strip() for v in r] + [""] * (width - len(r))))
+            for r in table[1:] if any(v.strip() for v in r)]
+    if not rows:
+        raise InputError(f"{man}: no photos listed")
+    return rows
+
+
 def read_folder(root: str | Path) -> list[RealPhoto]:
     """The photos of a folder with ``manifest.csv`` (columns image, mask; view and sequence
-    optional), each file checked to exist."""
+    optional; ``read_manifest``), each file checked to exist."""
     root = Path(root)
     man = root / "manifest.csv"
     if not man.is_file():
         raise InputError(f"{root}: no manifest.csv (columns image, mask[, view, sequence])")
-    try:
-        rows = list(csv.DictReader(man.open(encoding="utf-8", newline="")))
-    except (OSError, UnicodeDecodeError, csv.Error) as e:
-        raise InputError(f"{man}: unreadable ({e.__class__.__name__})") from None
-    if not rows:
-        raise InputError(f"{man}: no photos listed")
-    missing = [c for c in ("image", "mask") if c not in rows[0]]
-    if missing:
-        raise InputError(f"{man}: expected columns image and mask, missing {', '.join(missing)}")
-    names = [Path(r["image"] or "").stem for r in rows]
+    rows = read_manifest(man)
+    names = [Path(r.get("image") or "").stem for r in rows]
     seqs = ([r.get("sequence") or OTHER_SEQUENCE for r in rows] if "sequence" in rows[0]
             else sequences(names))
     photos = []
     for k, (r, name, seq) in enumerate(zip(rows, names, seqs), start=2):
-        img, mask = root / (r["image"] or ""), root / (r["mask"] or "")
-        for p in (img, mask):
-            if not p.is_file():
-                raise InputError(f"{man}, line {k}: {p} not found")
+        paths = []
+        for col in MANIFEST_COLUMNS:
+            if not r.get(col):
+                raise InputError(f"{man}, line {k}: no {col} given")
+            paths.append(root / r[col])
+            if not paths[-1].is_file():
+                raise InputError(f"{man}, line {k}: {paths[-1]} not found")
         note = r.get("view") or ""
-        photos.append(RealPhoto(img, mask, name, seq, r.get("view_type") or view_type(note), note))
+        photos.append(RealPhoto(paths[0], paths[1], name, seq, r.get("view_type") or view_type(note), note))
     return photos
 
 
-def read_pair(photo: RealPhoto, max_side: int | None = MAX_SIDE) -> tuple[np.ndarray, np.ndarray]:
-    """(BGR image, semantic mask uint8), scaled together so the longer side is at most
-    ``max_side`` (area-averaged image, nearest-neighbour mask)."""
-    img = cv2.imread(str(photo.image), cv2.IMREAD_COLOR)
-    if img is None:
-        raise InputError(f"{photo.image}: not a readable image")
-    sem = cv2.imread(str(photo.mask), cv2.IMREAD_UNCHANGED)
+def read_mask(path: Path) -> np.ndarray:
+    """A semantic mask, uint8 [H, W] of classes 0, 1 (blade), 2 (tower): refused from its header
+    when over the pixel limit, and when colour-coded or holding other values."""
+    sem = read_labelled_image(path, flags=cv2.IMREAD_UNCHANGED)
     if sem is None:
-        raise InputError(f"{photo.mask}: not a readable mask")
+        raise InputError(f"{path}: not a readable mask")
     if sem.ndim == 3:
         # A palette or colour-coded PNG comes out of OpenCV as colours, not class numbers:
         # grey stored as RGB is fine, anything else would be read as other classes.
         if sem.shape[2] == 4:
             sem = sem[:, :, :3]
         if not (sem == sem[:, :, :1]).all():
-            raise InputError(f"{photo.mask}: a colour mask (a palette or colour-coded PNG); "
+            raise InputError(f"{path}: a colour mask (a palette or colour-coded PNG); "
                              "expected one channel of class numbers 0, 1 (blade), 2 (tower)")
         sem = sem[:, :, 0]
-    h, w = img.shape[:2]
-    if sem.shape != (h, w):
-        raise InputError(f"{photo.mask}: mask is {sem.shape[1]}x{sem.shape[0]}, its image {w}x{h}")
     bad = set(np.unique(sem).tolist()) - {0, BLADE, TOWER}
     if bad:
-        raise InputError(f"{photo.mask}: expected classes 0, 1 (blade), 2 (tower), found {sorted(bad)}")
+        raise InputError(f"{path}: expected classes 0, 1 (blade), 2 (tower), found {sorted(bad)}")
+    return sem.astype(np.uint8)
+
+
+def check_photo(photo: RealPhoto) -> None:
+    """What ``read_pair`` would refuse, found before training starts: the mask decoded (its
+    values), the photo's size from its header where that tells it (``image_size_as_read``)."""
+    h, w = read_mask(photo.mask).shape
+    got = image_size_as_read(photo.image, (h, w))
+    if got is None:
+        raise InputError(f"{photo.image}: not a readable image")
+    if got != (h, w):
+        raise InputError(f"{photo.mask}: mask is {w}x{h} but its photo {photo.image} is "
+                         f"{got[1]}x{got[0]}")
+
+
+def read_pair(photo: RealPhoto, max_side: int | None = MAX_SIDE) -> tuple[np.ndarray, np.ndarray]:
+    """(BGR image, semantic mask uint8), scaled together so the longer side is at most
+    ``max_side`` (area-averaged image, nearest-neighbour mask)."""
+    sem = read_mask(photo.mask)
+    h, w = sem.shape
+    img = read_labelled_image(photo.image, (h, w))
+    if img is None:
+        raise InputError(f"{photo.image}: not a readable image")
+    if img.shape[:2] != (h, w):
+        raise InputError(f"{photo.mask}: mask is {w}x{h} but its photo {photo.image} is "
+                         f"{img.shape[1]}x{img.shape[0]}")
     f = min(1.0, max_side / max(h, w)) if max_side else 1.0
     if f < 1.0:
         size = (max(1, round(w * f)), max(1, round(h * f)))
         img = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
-        sem = cv2.resize(sem.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST)
-    return img, sem.astype(np.uint8)
+        sem = cv2.resize(sem, size, interpolation=cv2.INTER_NEAREST)
+    return img, sem
 
 
 # ---- semantic -> instances -----------------------------------------------------------------

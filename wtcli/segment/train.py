@@ -282,8 +282,11 @@ def _load_ckpt(path: Path) -> dict[str, Any]:
     return ck
 
 
-def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
-    """Run (or resume) a training run; returns the summary written to OUT/metrics.json."""
+def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = None,
+          note: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """Run (or resume) a training run; returns the summary written to OUT/metrics.json.
+    ``note``: told once, before the first step, what the data held beyond its instances (COCO
+    annotations ignored or skipped, images trained as negatives), a line per file."""
     cfg.check()
     if cfg.average_with:  # a bad file fails now, not after hours of training
         load_weights(build_model(), cfg.average_with)
@@ -318,6 +321,13 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
     elif cfg.init:
         load_weights(model, cfg.init)
     ds = make_dataset(cfg)
+    # --val is read at the end: a bad file must stop the run now, not after it has trained.
+    val = D.CocoDataset(cfg.val, augment=False) if cfg.val and cfg.eval_count else None
+    notes = [f"{opt} {n}" for opt, d in (("--data", getattr(ds, "base", ds)),
+                                         ("--real", getattr(ds, "real", None)), ("--val", val))
+             if hasattr(d, "notes") for n in d.notes()]
+    for n in notes if note else ():
+        note(n)
     model.to(device)
     sizes = tuple(cfg.train_sizes)
     if not cfg.data:  # never blow small renders up (mixed with photos too): at most their own size
@@ -402,13 +412,14 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
                                                 "mask_offset_px": MASK_OFFSET_PX})
     if cfg.average_with:
         average_weights([out / "model.pt", cfg.average_with], out / AVERAGE_NAME)
-    metrics = evaluate_run(model, cfg, device) if cfg.eval_count else {}
+    metrics = evaluate_run(model, cfg, device, val) if cfg.eval_count else {}
     recent = history[-50:]
     summary = {
         "arch": ARCH, "iterations": it, "stopped_by": stopped, "train_seconds": elapsed,
         "device": str(device), "precision": precision,
         "final_loss": float(np.mean([h["loss"] for h in recent])) if recent else None,
         "config": _cfg_dict(cfg), "train_sizes_used": list(sizes), "evaluation": metrics,
+        "data_notes": notes,
         "weights": str(out / "model.pt"), "checkpoint": str(ckpt_path),
         "average": str(out / AVERAGE_NAME) if cfg.average_with else None,
     }
@@ -416,20 +427,27 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
     return summary
 
 
-def evaluate_run(model, cfg: TrainConfig, device) -> dict[str, Any]:
-    """Quick end-of-run check: mask IoU per class, AP50 and blade-count accuracy."""
+def evaluate_run(model, cfg: TrainConfig, device, val: D.CocoDataset | None = None) -> dict[str, Any]:
+    """Quick end-of-run check: mask IoU per class, AP50 and blade-count accuracy. On ``--val``
+    (``val``, read before training), a detection at least half inside a crowd or box-only
+    region is left out, as COCO's evaluation does: that region is no instance to miss or hit."""
     from wtcli.segment.evaluate import Evaluator
     from wtcli.segment.infer import predict
 
     ev = Evaluator()
     if cfg.val:
-        vs = D.CocoDataset(cfg.val, augment=False)
+        vs = val if val is not None else D.CocoDataset(cfg.val, augment=False)
         samples = (vs.load(i) for i in range(min(len(vs), cfg.eval_count)))
     else:
         samples = (D.render(D.HELDOUT_SEED_BASE + 500_000 + i, cfg.width, cfg.height)
                    for i in range(cfg.eval_count))
     for s in samples:
         pred = predict(model, s.image, score_threshold=0.0, device=device)
+        ignore = getattr(s, "ignore", None)
+        if ignore is not None and len(pred):
+            area = pred.masks.reshape(len(pred), -1).sum(axis=1)
+            inside = (pred.masks & ignore).reshape(len(pred), -1).sum(axis=1)
+            pred = pred[inside < 0.5 * np.maximum(area, 1)]
         ev.add(pred, s.instances)
     return ev.summary()
 
