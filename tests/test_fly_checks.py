@@ -222,6 +222,7 @@ def test_a_launch_point_at_a_real_height_lands_on_flat_ground_like_one_at_zero()
     t = Turbine.with_rotor_azimuth(90, id="T1", base=(0.0, 0.0, 40.0), hub_height=30.0,
                                    rotor_diameter=24.0, yaw_deg=180.0)
     high = plan_mission(Mission((t,), CAM, fleet=Fleet(battery_minutes=3.0, battery_reserve_minutes=0.5,
+                                                       wind_margin=0.0,
                                                        battery_swap_s=20.0),
                                 settings=Settings(min_side_coverage=0.0, inspect_tower=False,
                                                   inspect_nacelle=False)))

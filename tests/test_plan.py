@@ -299,6 +299,34 @@ def test_battery_limit_inserts_swaps_or_refuses():
         plan_mission(Mission((t,), CAM, fleet=Fleet(battery_minutes=3, battery_reserve_minutes=1)))
 
 
+def test_sorties_leave_the_wind_margin_and_the_reserve():
+    """A sortie is planned to at most (battery - reserve) / (1 + wind_margin): flown that much
+    longer in wind it still lands with the reserve. Without the margin the same battery flies
+    fewer, fuller sorties; a component that fits the battery only without it is refused."""
+    t = make_turbine(az=70)
+    settings = Settings(min_side_coverage=0.0)
+    plans = {m: plan_mission(Mission((t,), CAM, settings=settings,
+                                     fleet=Fleet(battery_minutes=9, battery_reserve_minutes=2,
+                                                 wind_margin=m)))
+             for m in (0.0, 0.3)}
+    for m, plan in plans.items():
+        (r,) = plan.routes
+        times = _sortie_times(r)
+        assert max(times) <= 7 * 60 / (1 + m) + 1e-6
+        assert plan.summary["wind_margin"] == m
+    assert plans[0.3].routes[0].summary["sorties"] > plans[0.0].routes[0].summary["sorties"]
+    # the longest component alone: fits 7 min, not 7 / 2 min
+    longest = max(_sortie_times(plans[0.0].routes[0]))
+    battery = 2 + 1.02 * longest / 60
+    assert plan_mission(Mission((t,), CAM, settings=settings, fleet=Fleet(
+        battery_minutes=battery, battery_reserve_minutes=2, wind_margin=0.0)))
+    with pytest.raises(PlanError, match=r"wind_margin 1\b.*raise battery_minutes"):
+        plan_mission(Mission((t,), CAM, settings=settings, fleet=Fleet(
+            battery_minutes=battery / 2 + 1, battery_reserve_minutes=2, wind_margin=1.0)))
+    with pytest.raises(ValueError, match="wind_margin"):
+        Fleet(wind_margin=-0.1)
+
+
 def test_launch_point_too_close_is_refused():
     t = make_turbine()
     with pytest.raises(PlanError, match="launch point"):
@@ -492,6 +520,8 @@ def test_sample_yaml_loads_and_converts_lat_lon(tmp_path):
     ({"fleet": {"gimbal_pitch_max_deg": 120}}, r"fleet.gimbal_pitch_max_deg: expected a number in \[0, 90\], got 120"),
     ({"fleet": {"gimbal_pitch_min_deg": 10}}, r"fleet.gimbal_pitch_min_deg: expected a number in \[-90, 0\]"),
     ({"fleet": {"gimbal_pitch_max": 30}}, "did you mean 'gimbal_pitch_max_deg'"),
+    ({"fleet": {"wind_margin": -0.1}}, r"fleet.wind_margin: expected a number in \[0, 1\], got -0.1"),
+    ({"fleet": {"wind_margin": float("nan")}}, r"fleet.wind_margin: expected a number"),
 ])
 def test_bad_yaml_names_key_value_and_range(patch, message):
     base = {"turbines": [{"id": "T1", "position": [0, 0, 0], "hub_height_m": 80,
@@ -1178,9 +1208,10 @@ def test_every_sortie_keeps_the_battery_reserve_with_detoured_transits():
     second sortie 7 s longer than battery minus reserve (its estimate flew straight)."""
     case = random_case(np.random.default_rng(10034), gimbal=True)
     plan = plan_mission(case)
-    usable = case.fleet.usable_battery_s
+    fl = case.fleet
+    limit = 60 * (fl.battery_minutes - fl.battery_reserve_minutes) / (1 + fl.wind_margin)
     times = [x for r in plan.routes for x in _sortie_times(r)]
-    assert len(times) >= 2 and max(times) <= usable + 1e-6
+    assert len(times) >= 2 and max(times) <= limit + 1e-6
     assert max(r.summary["longest_sortie_s"] for r in plan.routes) == pytest.approx(max(times))
 
 

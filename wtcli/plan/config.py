@@ -43,8 +43,8 @@ TOP_KEYS = ("site", "camera", "fleet", "mission", "turbines")
 CAMERA_KEYS = ("sensor_width_mm", "focal_mm", "width_px", "height_px", "min_photo_interval_s",
                "shutter_s", "max_blur_px")
 FLEET_KEYS = ("uavs", "launch", "inspection_speed_m_s", "cruise_speed_m_s", "max_speed_m_s",
-              "climb_rate_m_s", "battery_minutes", "battery_reserve_minutes", "battery_swap_s",
-              "gimbal_pitch_min_deg", "gimbal_pitch_max_deg")
+              "climb_rate_m_s", "battery_minutes", "battery_reserve_minutes", "wind_margin",
+              "battery_swap_s", "gimbal_pitch_min_deg", "gimbal_pitch_max_deg")
 MISSION_KEYS = ("safe_distance_m", "tracking_margin_m", "target_gsd_mm", "overlap",
                 "max_incidence_deg", "min_altitude_m", "takeoff_altitude_m", "min_side_coverage",
                 "coverage_spacing_m", "inspect_tower", "inspect_nacelle", "tower_columns",
@@ -78,6 +78,9 @@ class Fleet:
     climb_rate_m_s: float = float(_default("fleet", "climb_rate_m_s"))
     battery_minutes: float = float(_default("fleet", "battery_minutes"))
     battery_reserve_minutes: float = float(_default("fleet", "battery_reserve_minutes"))
+    # Share of a sortie's planned time kept for what wind and the controller add to it, so the
+    # reserve is still there at landing (docs/plan.md "Battery").
+    wind_margin: float = float(_default("fleet", "wind_margin"))
     battery_swap_s: float = float(_default("fleet", "battery_swap_s"))
     # Camera elevation the gimbal can reach (0 level, -90 straight down, +90 straight up): the
     # default needs one that can look straight up (top-mounted); under-slung ones stop near +30.
@@ -93,6 +96,8 @@ class Fleet:
         if self.battery_minutes <= self.battery_reserve_minutes:
             raise ValueError(f"expected battery_minutes ({self.battery_minutes}) > "
                              f"battery_reserve_minutes ({self.battery_reserve_minutes})")
+        if not 0.0 <= self.wind_margin <= 1.0:
+            raise ValueError(f"expected wind_margin in [0, 1], got {self.wind_margin}")
         if not -90.0 <= self.gimbal_pitch_min_deg <= 0.0 <= self.gimbal_pitch_max_deg <= 90.0:
             raise ValueError(f"expected -90 <= gimbal_pitch_min_deg ({self.gimbal_pitch_min_deg}) "
                              f"<= 0 <= gimbal_pitch_max_deg ({self.gimbal_pitch_max_deg}) <= 90")
@@ -106,6 +111,12 @@ class Fleet:
     @property
     def usable_battery_s(self) -> float:
         return 60.0 * (self.battery_minutes - self.battery_reserve_minutes)
+
+    @property
+    def sortie_limit_s(self) -> float:
+        """The longest sortie planned: one that, flown ``wind_margin`` longer, still lands with
+        the reserve."""
+        return self.usable_battery_s / (1.0 + self.wind_margin)
 
 
 @dataclass(frozen=True)
@@ -440,6 +451,7 @@ def mission_from_dict(d: Any, where: str = "turbines.yaml", base_dir: str | Path
             climb_rate_m_s=number(f, "climb_rate_m_s", w, 0.2, 15),
             battery_minutes=number(f, "battery_minutes", w, 1, 300),
             battery_reserve_minutes=number(f, "battery_reserve_minutes", w, 0, 100),
+            wind_margin=number(f, "wind_margin", w, 0, 1),
             battery_swap_s=number(f, "battery_swap_s", w, 0, 3600),
             gimbal_pitch_min_deg=number(f, "gimbal_pitch_min_deg", w, -90, 0),
             gimbal_pitch_max_deg=number(f, "gimbal_pitch_max_deg", w, 0, 90))

@@ -456,8 +456,8 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
     the workers); any other leg is connected here. ``times``: ``chunk_time`` of each chunk, if
     known. With ``missing``, a dry run: the legs not in ``links`` are appended to it (as (p, q))
     instead of connected, and no route is returned. ``cap``: a battery change once a sortie
-    would pass this many seconds (at most the usable battery; a chunk longer than it flies
-    alone); ``sorties`` gets the number of sorties appended.
+    would pass this many seconds (at most the fleet's sortie limit; a chunk longer than it
+    flies alone); ``sorties`` gets the number of sorties appended.
 
     The battery decisions time each transit and return leg along its via points where the leg
     is in ``links`` (straight where not yet connected): a detour round a turbine is flown, so
@@ -467,7 +467,7 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
     sp = speeds(mission, pp)
     v_fast, climb = sp.cruise, sp.climb
     above = launch + Z * s.takeoff_altitude_m
-    usable = fl.usable_battery_s
+    usable = fl.sortie_limit_s
     limit = usable if cap is None else min(cap, usable)
     first_fwd = _unit(np.r_[(chunks[0].start - launch)[:2], 0.0] + 1e-9)
     wps: list[WP] = [WP(launch.copy(), first_fwd, False, "launch", False)]
@@ -516,8 +516,7 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
                 raise PlanError(
                     f"{ch.turbine} {ch.name} takes {(fresh + t_ch + t_back) / 60:.1f} min from "
                     f"take-off to landing, more than one battery allows "
-                    f"({fl.battery_minutes:g} - {fl.battery_reserve_minutes:g} reserve = "
-                    f"{usable / 60:.1f} min); raise battery_minutes or the speeds")
+                    f"({_battery_words(fl)}); raise battery_minutes or the speeds")
             if len(wps) > 2:  # not already on a fresh battery at the launch point
                 go_home()
                 wps.append(WP(launch.copy(), None, False, "launch", False))  # battery swap
@@ -539,16 +538,22 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
                         sp.interval, sorted({c.turbine for c in chunks}))
 
 
-SORTIE_CAP_STEPS = 12  # bisections of the balanced sorties' cap (usable battery / 4096)
+def _battery_words(fl) -> str:
+    """The sortie limit as the settings make it, for messages."""
+    return (f"({fl.battery_minutes:g} battery - {fl.battery_reserve_minutes:g} reserve) / "
+            f"(1 + wind_margin {fl.wind_margin:g}) = {fl.sortie_limit_s / 60:.2f} min")
+
+
+SORTIE_CAP_STEPS = 12  # bisections of the balanced sorties' cap (sortie limit / 4096)
 
 
 def _balanced_cap(job: tuple) -> float | None:
-    """The least battery cap that flies ``job``'s route in as many sorties as the whole usable
-    battery does (bisected on dry runs): the same battery changes, each sortie as short as they
-    allow, so the reserve is left for wind rather than the first sortie filled to the brim and
-    the last one short. None for a route of one sortie."""
+    """The least battery cap that flies ``job``'s route in as many sorties as the whole sortie
+    limit does (bisected on dry runs): the same battery changes, each sortie as short as they
+    allow, so more than the wind margin is left for wind rather than the first sortie filled to
+    the brim and the last one short. None for a route of one sortie."""
     mission = job[3]
-    usable = mission.fleet.usable_battery_s
+    usable = mission.fleet.sortie_limit_s
 
     def count(cap: float | None) -> int:  # a chunk too long for any battery raises either way
         n: list = []
@@ -597,7 +602,7 @@ def _timed_route(uav: str, wps: list[WP], swaps: list[int], sp: Speeds, swap_s: 
                      v_cmd)
     speed = np.r_[0.0, np.where(L > 1e-6, v_cmd, 0.0)]
     # Each sortie: from leaving the launch point to landing there (the swap's ground time not
-    # included): what the usable battery (battery_minutes - reserve) must cover.
+    # included): what the sortie limit (Fleet.sortie_limit_s) must cover.
     starts, ends = [0] + list(swaps), [i - 1 for i in swaps] + [n - 1]
     sorties = [float(t[b] - t[a]) for a, b in zip(starts, ends)]
     comp = np.array([w.component for w in wps], dtype=object)
@@ -1013,11 +1018,10 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
     jobs = [(*job, None, caps.get(job[0])) for job in jobs]  # (..., missing, cap)
     routes = _map(_route, jobs, workers, stage_ticker(progress, "routes", len(jobs)))
     over = [(r.uav, r.summary["longest_sortie_s"]) for r in routes
-            if r.summary["longest_sortie_s"] > fl.usable_battery_s + 1e-6]
+            if r.summary["longest_sortie_s"] > fl.sortie_limit_s + 1e-6]
     if over:
         raise PlanError(f"{over[0][0]}: a sortie takes {over[0][1] / 60:.2f} min, more than "
-                        f"battery_minutes - battery_reserve_minutes = "
-                        f"{fl.usable_battery_s / 60:.2f} min: the reserve would be flown")
+                        f"{_battery_words(fl)}: in wind the reserve would be flown")
 
     check = check_routes(routes, site_real, launch, s.safe_distance_m, s.min_altitude_m)
     if enforce_safety and (check["waypoint_violations"] or check["leg_violations"]
@@ -1124,6 +1128,7 @@ def _summary(routes: list[Route], mission: Mission, pattern: str, check: dict, c
         "tracking_margin_m": s.tracking_margin_m,
         "battery_minutes": mission.fleet.battery_minutes,
         "battery_reserve_minutes": mission.fleet.battery_reserve_minutes,
+        "wind_margin": mission.fleet.wind_margin,
         "gimbal_pitch_range_deg": list(pp.pitch_range),
         "launch": launch.tolist(),
         "turbines": zones,
