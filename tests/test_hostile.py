@@ -692,6 +692,20 @@ def test_json_over_the_size_limit_is_refused_before_reading(cli, tmp_path, comma
     assert time.monotonic() - t0 < 20  # refused from the size, not after reading 2 GB
 
 
+def test_a_small_json_reads_under_a_memory_cap(tmp_path):
+    """A batch job capped at 1 GB of address space read no JSON at all: the reader asked for
+    its whole 1 GB limit in one buffer before reading a byte."""
+    f = tmp_path / "small.json"
+    f.write_text('{"a": [1, 2]}')
+    code = ("import resource, sys\n"
+            "from wtcli.jsonio import read_json\n"
+            "resource.setrlimit(resource.RLIMIT_AS, (1 << 30, 1 << 30))\n"
+            "print(read_json(sys.argv[1]))\n")
+    r = subprocess.run([sys.executable, "-c", code, str(f)], capture_output=True, text=True,
+                       cwd=ROOT, timeout=120)
+    assert r.returncode == 0 and r.stdout.strip() == "{'a': [1, 2]}", r.stderr[-500:]
+
+
 def test_yaml_over_the_size_limit_is_refused(cli, tmp_path):
     big = _sparse(tmp_path / "big.yaml", 20_000_000)
     assert "20 MB is over the 16 MB limit for a YAML input" in one_error_line(cli("plan", big), 3, big)

@@ -164,7 +164,7 @@ def read_capped(path: str | Path, max_bytes: int, kind: str) -> str:
         if size is not None and size > max_bytes:
             raise InputError(f"{path}: {size_text(size)} is {too_big}")
         with open(path, "rb") as f:
-            data = f.read(max_bytes + 1)
+            data = _read_upto(f, max_bytes + 1)
     except FileNotFoundError:
         raise InputError(f"{path}: {missing(path)}") from None
     except IsADirectoryError:
@@ -175,6 +175,19 @@ def read_capped(path: str | Path, max_bytes: int, kind: str) -> str:
         raise InputError(f"{path}: more than {size_text(max_bytes)}, the limit for a {kind} input "
                          "(docs/exit-codes.md)")
     return data.decode("utf-8")
+
+
+def _read_upto(f, limit: int, chunk: int = 1 << 24) -> bytes:
+    """At most ``limit`` bytes of ``f``, read in chunks: ``f.read(limit)`` would ask for the
+    whole limit (1 GB for JSON) at once, which a memory-capped batch job refuses."""
+    parts, n = [], 0
+    while n < limit:
+        part = f.read(min(chunk, limit - n))
+        if not part:
+            break
+        parts.append(part)
+        n += len(part)
+    return b"".join(parts)
 
 
 class _NotANumber(ValueError):
