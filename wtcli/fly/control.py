@@ -22,15 +22,49 @@ holds the set-point back for the vehicle (``control.leash_m``). The loop asks ea
 it ``feeds_acceleration`` (adds the reference acceleration to the thrust) and whether it
 ``holds_position`` (then drifting ``divergence_m`` from the set-point is a failed flight).
 The arithmetic is written out per axis on floats: step() is called 50 times per simulated second.
+The reference's rows reach a controller as Python lists (cheap to index per step), ``Rows`` making
+them a block of ``BLOCK_STEPS`` at a time from the arrays: a whole route's lists would take
+~150 bytes a row each, over a gigabyte on a wide site's long route (docs/fly.md "Memory").
 """
 
 from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
+
+BLOCK_STEPS = 4096  # rows made into Python lists at a time (here and in the flight loop)
+
+
+class Rows:
+    """The rows of an (N, d) array as lists of floats (floats for an (N,) array), made a block
+    of ``block`` rows at a time from the first row asked for: what a controller indexes per step
+    (indexing a list is far cheaper than a numpy scalar) without a list of every row."""
+
+    __slots__ = ("_a", "_block", "_lo", "_hi", "_rows")
+
+    def __init__(self, a: np.ndarray, block: int | None = None) -> None:
+        self._a = np.asarray(a, float)
+        self._block = max(1, int(block or BLOCK_STEPS))
+        self._lo = self._hi = 0
+        self._rows: list = []
+
+    def __len__(self) -> int:
+        return len(self._a)
+
+    def __getitem__(self, k: int):
+        if self._lo <= k < self._hi:
+            return self._rows[k - self._lo]
+        n = len(self._a)
+        if not -n <= k < n:
+            raise IndexError(f"expected a row index in [0, {n}), got {k}")
+        k = k + n if k < 0 else int(k)
+        self._lo, self._hi = k, min(n, k + self._block)
+        self._rows = self._a[self._lo:self._hi].tolist()
+        return self._rows[0]
 
 
 @dataclass(frozen=True)
@@ -166,14 +200,15 @@ class PilotController(Controller):
     def __init__(self, ref_pos: list, ref_vel: list, inputs: PilotInputs,
                  limits: VelocityLimits) -> None:
         self.R, self.V = ref_pos, ref_vel
-        self.PP, self.PS = inputs.perception.tolist(), inputs.stick.tolist()
+        self.PP, self.PS = Rows(inputs.perception), Rows(inputs.stick)
         self.delay, self.gain = inputs.delay_steps, inputs.gain
         self.deadband, self.max_correction = inputs.deadband, inputs.max_correction
         self.limits = limits
         self.reset()
 
     def reset(self) -> None:
-        self.hist: list[tuple[float, float, float]] = []  # true positions, seen late
+        # True positions, seen late: the last delay + 1 of them (the oldest is seen now).
+        self.hist: deque[tuple[float, float, float]] = deque(maxlen=max(self.delay, 0) + 1)
 
     def step(self, k, pos, vel, true_pos):
         vrx, vry, vrz = self.V[k]
@@ -181,7 +216,7 @@ class PilotController(Controller):
         j = k - self.delay
         ex = ey = ez = 0.0
         if j >= 0:
-            hx, hy, hz = self.hist[j]
+            hx, hy, hz = self.hist[0]
             qx, qy, qz = self.PP[j]
             sx, sy, sz = self.R[j]
             ex, ey, ez = sx - (hx + qx), sy - (hy + qy), sz - (hz + qz)
@@ -199,5 +234,5 @@ class PilotController(Controller):
         return cx, cy, cz
 
 
-__all__ = ["Controller", "FeedForwardController", "PidController", "PilotController",
-           "PilotInputs", "VelocityLimits"]
+__all__ = ["BLOCK_STEPS", "Controller", "FeedForwardController", "PidController",
+           "PilotController", "PilotInputs", "Rows", "VelocityLimits"]

@@ -3,16 +3,20 @@
 ``fly_plan(plan, scenario)`` flies every route of the plan with the eq. 10 PID controller
 (``automated``) and, if asked, the baselines on the same weather: ``no_compensation`` (the same
 plan, feed-forward only), ``fixed_pattern`` (a non-adaptive plan, PID controlled) and
-``manual`` (wtcli.fly.pilot). Each flight is then measured, vectorised over all steps:
-deviation from the planned path, clearance to every turbine part, height above ground,
-coverage of the blade surfaces from the photos actually taken, GSD, time, length, battery.
+``manual`` (wtcli.fly.pilot). Each route is measured as soon as it is flown, vectorised over
+its steps (``measure_flight``: deviation from the planned path, clearance to every turbine part
+and height above ground at every step, the violations, battery per sortie), and the report
+keeps of it those per-step measures, its times and positions and its photos; then the flights
+of a kind are measured together (``measure``: coverage of the blade surfaces from the photos
+actually taken, GSD, time, length). So a wide site's memory holds one route's whole
+simulation at a time, not every route's (docs/fly.md "Memory").
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -42,12 +46,14 @@ _WIND, _SENSOR, _PILOT, _WAKE = 1, 2, 3, 4
 
 @dataclass(frozen=True)
 class UavFlight:
-    """One UAV's route, flown."""
+    """One UAV's route, flown. ``fly_route`` returns it whole; in a ``FlightResult`` from
+    ``fly_plan`` it is ``kept()``: measured, its reference and all of its track but the times
+    and positions let go."""
 
     uav: str
     route: Route  # the route as flown (the manual pilot's is retimed)
     planned: Route  # the route of the plan (the path deviation is measured against)
-    ref: Reference
+    ref: Reference | None  # None once kept()
     track: Track
     photo_step: np.ndarray  # (P,) index into the track
     photo_yaw_deg: np.ndarray  # (P,) camera attitude when each photo was taken
@@ -59,6 +65,12 @@ class UavFlight:
     @property
     def photo_pos(self) -> np.ndarray:
         return self.track.pos[self.photo_step]
+
+    def kept(self) -> UavFlight:
+        """This flight as a report keeps it once measured (``measure_flight``): the track's
+        times and positions (the pictures, each UAV's time and length) and the photos; the
+        reference and the rest of the track, ~200 bytes a control step, let go."""
+        return replace(self, ref=None, track=self.track.positions())
 
 
 @dataclass(frozen=True)
@@ -428,62 +440,94 @@ def plan_number(plan: Plan, key: str, lo: float, hi: float) -> float | None:
     return float(v)
 
 
-def measure(kind: str, controller: str, plan: Plan, flights: list[UavFlight], scn: Scenario,
-            ground: Ground, planned_coverage: bool = False, notes: list[str] | None = None
-            ) -> FlightResult:
-    # Time: each UAV until it settles within SETTLED_M of its last waypoint after the reference
-    # ends (or the end of the settle window).
-    times, devs, trks, pos_all, t_all, uav_all, ref_all, comp_all, vz_all = ([] for _ in range(9))
-    for f in flights:
-        tr, ref = f.track, f.ref
-        end = ref.end_index
-        d_end = np.linalg.norm(tr.pos[end:] - f.route.pos[-1], axis=1)
-        settled = np.nonzero(d_end < SETTLED_M)[0]
-        k_end = end + (int(settled[0]) if len(settled) else len(d_end) - 1)
-        times.append(float(tr.t[k_end] - tr.t[0]))
-        sl = slice(0, k_end + 1)
-        pos = tr.pos[sl]
-        devs.append(path_deviation(f.route.pos, np.floor(ref.wp_index[sl]).astype(int), pos))
-        trks.append(np.linalg.norm(pos - ref.pos[sl], axis=1))
-        pos_all.append(pos)
-        t_all.append(tr.t[sl])
-        uav_all.append(np.full(len(pos), f.uav, dtype=object))
-        ref_all.append(ref.pos[sl])
-        vz_all.append(ref.vel[sl, 2])
-        seg = np.clip(np.floor(ref.wp_index[sl]).astype(int) + 1, 0, len(f.route) - 1)
-        comp_all.append(f.route.component[seg])
-    P = np.concatenate(pos_all)
-    T = np.concatenate(t_all)
-    U = np.concatenate(uav_all)
-    REF = np.concatenate(ref_all)
-    COMP = np.concatenate(comp_all)
-    clearance, part = turbine_clearance(plan.turbines, P)
-    g = ground.height(P)
-    agl = P[:, 2] - g
-    ref_agl = REF[:, 2] - ground.height(REF)
+MEASURE_BLOCK = 65536  # steps whose clearance and height are found at a time
+
+
+@dataclass(frozen=True)
+class UavMeasures:
+    """One UAV's flight measured at every control step until it settled (``measure_flight``):
+    what the report needs of its track and reference."""
+
+    uav: str
+    time_s: float  # until it settles within SETTLED_M of its last waypoint
+    length_m: float  # flown until then
+    deviation: np.ndarray  # (K,) distance to the planned path
+    tracking_error: np.ndarray  # (K,) distance to the reference flown
+    clearance: np.ndarray  # (K,) distance to the nearest turbine part
+    agl: np.ndarray  # (K,) height above ground
+    violations: list[Violation]
+    sorties: list[tuple[float, float]]  # (energy Wh, flown time s) of each sortie
+
+
+def measure_flight(f: UavFlight, plan: Plan, scn: Scenario, ground: Ground) -> UavMeasures:
+    """Measure one UAV's whole flight (``f`` as ``fly_route`` returns it) at every control step:
+    deviation, tracking error, clearance to every turbine part, height above ground, the
+    violations of them, the sorties' energy and time."""
+    tr, ref = f.track, f.ref
+    if ref is None:
+        raise ValueError(f"expected {f.uav}'s flight as flown (with its reference), got one "
+                         "already measured and kept")
+    # Time: until it settles within SETTLED_M of its last waypoint after the reference ends (or
+    # the end of the settle window).
+    end = ref.end_index
+    d_end = np.linalg.norm(tr.pos[end:] - f.route.pos[-1], axis=1)
+    settled = np.nonzero(d_end < SETTLED_M)[0]
+    k_end = end + (int(settled[0]) if len(settled) else len(d_end) - 1)
+    sl = slice(0, k_end + 1)
+    P, T, REF = tr.pos[sl], tr.t[sl], ref.pos[sl]
+    wp = np.floor(ref.wp_index[sl]).astype(int)
+    deviation = path_deviation(f.route.pos, wp, P)
+    tracking = np.linalg.norm(P - REF, axis=1)
+    # Every step, a block at a time (the parts' distances of all steps at once take ~130 bytes
+    # a step). Both are per point: the blocks change no clearance, and a hilly ground's height
+    # at most in its last bit (its matrix product rounds by how many points it is given).
+    n = len(P)
+    clearance, agl, ref_agl = np.empty(n), np.empty(n), np.empty(n)
+    part = np.empty(n, dtype=object)
+    for s0 in range(0, n, MEASURE_BLOCK):
+        s1 = min(n, s0 + MEASURE_BLOCK)
+        clearance[s0:s1], part[s0:s1] = turbine_clearance(plan.turbines, P[s0:s1])
+        agl[s0:s1] = P[s0:s1, 2] - ground.height(P[s0:s1])
+        ref_agl[s0:s1] = REF[s0:s1, 2] - ground.height(REF[s0:s1])
 
     violations: list[Violation] = []
 
     def add(kind_: str, mask: np.ndarray, values: np.ndarray, what: np.ndarray | str) -> None:
         for a, b in _episodes(mask):
-            # Episodes never span two UAVs: split where the UAV changes.
-            for s0, s1 in _split_by(U, a, b):
-                i = s0 + int(np.argmin(values[s0:s1]))
-                violations.append(Violation(kind_, str(U[i]), float(T[s0]), float(T[s1 - 1]),
-                                            float(values[i]), tuple(float(x) for x in P[i]),
-                                            str(what if isinstance(what, str) else what[i])))
+            i = a + int(np.argmin(values[a:b]))
+            violations.append(Violation(kind_, f.uav, float(T[a]), float(T[b - 1]),
+                                        float(values[i]), tuple(float(x) for x in P[i]),
+                                        str(what if isinstance(what, str) else what[i])))
 
     add("collision", clearance <= 0.0, clearance, part)
     add("clearance", (clearance < plan.safe_distance_m) & (clearance > 0.0), clearance, part)
     planned_low = ref_agl < scn.terrain.min_agl_m + 2.0  # take-off and landing: planned low
     add("ground", (agl < scn.terrain.min_agl_m) & ~planned_low, agl, "ground")
-    transit = np.array(["transit" in str(c) for c in COMP])
-    level = np.abs(np.concatenate(vz_all)) < 0.5
+    # The component of the leg the set-point is on.
+    transit = np.array(["transit" in str(c) for c in f.route.component], bool)
+    transit = transit[np.clip(wp + 1, 0, len(f.route) - 1)]
+    level = np.abs(ref.vel[sl, 2]) < 0.5
     # Level transit legs (not the climb out or the descent to land) must keep the terrain's
     # transit height: a plan made for flat ground can be too low over a hill.
     add("transit_altitude", transit & level & ~planned_low & (agl < scn.terrain.min_transit_agl_m),
         agl, "ground")
-    violations.sort(key=lambda v: (v.t_start, v.uav, v.kind))
+    return UavMeasures(uav=f.uav, time_s=float(tr.t[k_end] - tr.t[0]), length_m=_length(P),
+                       deviation=deviation, tracking_error=tracking, clearance=clearance, agl=agl,
+                       violations=violations, sorties=_sorties(f, scn, ground))
+
+
+def measure(kind: str, controller: str, plan: Plan, flights: list[UavFlight], scn: Scenario,
+            ground: Ground, planned_coverage: bool = False, notes: list[str] | None = None,
+            measured: list[UavMeasures] | None = None) -> FlightResult:
+    """The flights of one kind, measured: ``measured`` (one per flight, in order) where
+    ``measure_flight`` has measured them as they were flown, else measured here (``flights``
+    then as ``fly_route`` returns them)."""
+    if measured is None:
+        measured = [measure_flight(f, plan, scn, ground) for f in flights]
+    if len(measured) != len(flights):
+        raise ValueError(f"expected {len(flights)} measured flights, got {len(measured)}")
+    violations = sorted((v for m in measured for v in m.violations),
+                        key=lambda v: (v.t_start, v.uav, v.kind))
 
     # Photos: real poses -> the one coverage measure.
     cam = plan.camera
@@ -502,7 +546,7 @@ def measure(kind: str, controller: str, plan: Plan, flights: list[UavFlight], sc
                    zip(r.yaw_deg[r.photo], r.gimbal_pitch_deg[r.photo])]
         pcov = _coverage(plan, cam, np.concatenate(pp), np.array(pr).reshape(-1, 3, 3), scn)
     gsd = cam.gsd_mm(turbine_clearance(plan.turbines, ppos)[0]) if len(ppos) else np.zeros(0)
-    sorties = {f.uav: _sorties(f, scn, ground) for f in flights}
+    sorties = {f.uav: m.sorties for f, m in zip(flights, measured)}
     energy = {u: [e for e, _ in v] for u, v in sorties.items()}
     sortie_time = {u: [d for _, d in v] for u, v in sorties.items()}
     notes = list(notes or [])
@@ -535,9 +579,13 @@ def measure(kind: str, controller: str, plan: Plan, flights: list[UavFlight], sc
     return FlightResult(
         kind=kind, controller=controller, uavs=flights, turbines=list(plan.turbines), camera=cam,
         safe_distance_m=plan.safe_distance_m, target_gsd_mm=plan.target_gsd_mm,
-        time_s=max(times), path_length_m=float(sum(_length(p) for p in pos_all)),
-        deviation=np.concatenate(devs), tracking_error=np.concatenate(trks), clearance=clearance,
-        agl=agl, violations=violations, coverage=coverage, planned_coverage=pcov,
+        time_s=max(m.time_s for m in measured),
+        path_length_m=float(sum(m.length_m for m in measured)),
+        deviation=np.concatenate([m.deviation for m in measured]),
+        tracking_error=np.concatenate([m.tracking_error for m in measured]),
+        clearance=np.concatenate([m.clearance for m in measured]),
+        agl=np.concatenate([m.agl for m in measured]), violations=violations, coverage=coverage,
+        planned_coverage=pcov,
         photo_gsd_mm=np.asarray(gsd, float), energy_wh=energy, battery_wh=scn.vehicle.battery_wh,
         sortie_time_s=sortie_time, usable_battery_s=usable_s, reserve_fraction=reserve_frac,
         tracking_margin_m=plan_number(plan, "tracking_margin_m", 0.0, 1000.0), notes=notes)
@@ -559,16 +607,6 @@ def _reserve_eaten(time_s: float, energy_wh: float, usable_s: float, reserve_fra
     return out
 
 
-def _split_by(labels: np.ndarray, a: int, b: int) -> list[tuple[int, int]]:
-    out, s = [], a
-    for i in range(a + 1, b):
-        if labels[i] != labels[i - 1]:
-            out.append((s, i))
-            s = i
-    out.append((s, b))
-    return out
-
-
 def _coverage(plan: Plan, cam: Camera, pos: np.ndarray, rots: np.ndarray,
               scn: Scenario) -> dict[str, Coverage]:
     out = {}
@@ -582,11 +620,28 @@ def _coverage(plan: Plan, cam: Camera, pos: np.ndarray, rots: np.ndarray,
 
 def fly_routes(plan: Plan, scn: Scenario, ground: Ground, mode: str,
                tick: Callable[[], None] = lambda: None) -> list[UavFlight]:
+    """Every route of ``plan``, flown whole (for ``measure``)."""
     out = []
     for i, r in enumerate(plan.routes):
         out.append(fly_route(r, scn, ground, i, mode, turbines=plan.turbines))
         tick()
     return out
+
+
+def fly_and_measure(plan: Plan, scn: Scenario, ground: Ground, mode: str,
+                    tick: Callable[[], None] = lambda: None
+                    ) -> tuple[list[UavFlight], list[UavMeasures]]:
+    """Every route of ``plan``, each measured as soon as it is flown and then ``kept()``: a
+    wide site's report holds its routes' per-step measures, not every route's whole track and
+    reference (docs/fly.md "Memory"). ``measure(..., measured=...)`` takes the pair."""
+    flights, measured = [], []
+    for i, r in enumerate(plan.routes):
+        f = fly_route(r, scn, ground, i, mode, turbines=plan.turbines)
+        measured.append(measure_flight(f, plan, scn, ground))
+        flights.append(f.kept())
+        del f  # not alive beside the next route's simulation
+        tick()
+    return flights, measured
 
 
 def launch_point(route: Route) -> np.ndarray | None:
@@ -774,13 +829,15 @@ def fly_plan(plan: Plan, scn: Scenario, baselines: bool = False, fixed_plan: Pla
     flights = {}
     for kind, mode, p in todo:
         tick = stage_ticker(progress, kind, len(p.routes) + 1)
-        flights[kind] = measure(kind, mode, p, fly_routes(p, scn, ground, mode, tick), scn, ground,
-                                planned_coverage=kind == "automated")
+        flown, measured = fly_and_measure(p, scn, ground, mode, tick)
+        flights[kind] = measure(kind, mode, p, flown, scn, ground,
+                                planned_coverage=kind == "automated", measured=measured)
         tick()
     return FlightReport(scenario=scn, flights=flights, plan_source=plan_source, notes=notes,
                         preflight=preflight)
 
 
-__all__ = ["FLIGHT_KINDS", "FlightReport", "FlightResult", "UavFlight", "Violation", "describe",
-           "launch_point", "make_ground", "on_ground", "plan_violations", "fly_plan",
-           "fly_route", "measure", "path_deviation", "turbine_clearance"]
+__all__ = ["FLIGHT_KINDS", "FlightReport", "FlightResult", "UavFlight", "UavMeasures", "Violation",
+           "describe", "fly_and_measure", "launch_point", "make_ground", "on_ground",
+           "plan_violations", "fly_plan", "fly_route", "fly_routes", "measure", "measure_flight",
+           "path_deviation", "turbine_clearance"]

@@ -36,7 +36,10 @@ reference actually flown.
 
 Physics runs at ``physics_hz`` (semi-implicit Euler), control at ``control_hz``; states are
 recorded at the control rate. The controller runs in plain Python per control step, the rigid
-body's physics steps compiled; everything else is precomputed or evaluated after the run.
+body's physics steps compiled; everything else is precomputed or evaluated after the run. The
+precomputed inputs reach the loop as Python lists a block of ``BLOCK_STEPS`` steps at a time
+(``wtcli.fly.control``), and the track leaves it as arrays a block at a time, so the loop's
+own memory does not grow with the route (docs/fly.md "Memory").
 """
 
 from __future__ import annotations
@@ -48,8 +51,8 @@ import numpy as np
 
 from wtcli.errors import SimulationError
 from wtcli.fly.control import (Controller, FeedForwardController, PidController, PilotController,
-                               PilotInputs, VelocityLimits)
-from wtcli.fly import rigid
+                               PilotInputs, Rows, VelocityLimits)
+from wtcli.fly import control as controls, rigid
 from wtcli.fly.navigation import Navigation
 from wtcli.fly.scenario import Scenario
 from wtcli.fly.wind import WindSeries
@@ -191,30 +194,39 @@ def make_reference(t_wp: np.ndarray, pos_wp: np.ndarray, yaw_wp: np.ndarray, pit
 
 @dataclass(frozen=True)
 class Track:
-    """One simulated flight, at the control rate."""
+    """One simulated flight, at the control rate. ``positions()`` keeps only ``t`` and ``pos``
+    (the rest None): what a report keeps of a flight once it is measured."""
 
     t: np.ndarray  # (N,)
     pos: np.ndarray  # (N, 3) true position
-    vel: np.ndarray  # (N, 3)
-    thrust: np.ndarray  # (N, 3) thrust acceleration (for tilt and power)
-    wind: np.ndarray  # (N, 3) wind at the vehicle
-    yaw_deg: np.ndarray  # (N,) camera heading actually flown
-    pitch_deg: np.ndarray  # (N,) gimbal elevation actually flown
+    vel: np.ndarray | None  # (N, 3)
+    thrust: np.ndarray | None  # (N, 3) thrust acceleration (for tilt and power)
+    wind: np.ndarray | None  # (N, 3) wind at the vehicle
+    yaw_deg: np.ndarray | None  # (N,) camera heading actually flown
+    pitch_deg: np.ndarray | None  # (N,) gimbal elevation actually flown
     progress: np.ndarray | None = None  # (N,) the set-point's fractional reference index
 
     def __post_init__(self) -> None:
         n = len(self.t)
         for name in ("pos", "vel", "thrust", "wind"):
-            if getattr(self, name).shape != (n, 3):
-                raise ValueError(f"expected {name} of shape ({n}, 3), got {getattr(self, name).shape}")
+            a = getattr(self, name)
+            if (a is not None or name == "pos") and np.shape(a) != (n, 3):
+                raise ValueError(f"expected {name} of shape ({n}, 3), got {np.shape(a)}")
+
+    def positions(self) -> Track:
+        """Only the times and true positions."""
+        return Track(self.t, self.pos, None, None, None, None, None)
 
 
 def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.ndarray,
-        controller: Controller, nav: Navigation, wake: np.ndarray | None = None) -> Track:
+        controller: Controller, nav: Navigation, wake: np.ndarray | None = None,
+        block: int | None = None) -> Track:
     """Fly ``ref`` with ``controller`` (reset first) and return the track. The controller sees
     the true state plus the navigation errors ``nav``; ``wake`` (N, 3), if given, is the
     structure's wake added to the wind at each control step. ``scn.vehicle.model`` picks the
-    physics: ``rigid`` (wtcli.fly.rigid, compiled) or ``kinematic`` (below)."""
+    physics: ``rigid`` (wtcli.fly.rigid, compiled) or ``kinematic`` (below). ``block``: control
+    steps whose inputs are turned into Python lists at a time (default ``BLOCK_STEPS``); the
+    flight is the same, bit for bit, whatever it is."""
     veh, ctl = scn.vehicle, scn.control
     n = len(ref.t)
     sub = scn.substeps
@@ -224,22 +236,42 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
         raise ValueError(f"expected {n * sub} wind samples, got {len(wind.extra)}")
     if nav.pos_error.shape != (n, 3) or nav.vel_error.shape != (n, 3):
         raise ValueError(f"expected navigation errors of shape ({n}, 3)")
+    block = max(2, int(block or controls.BLOCK_STEPS))
     controller.reset()
     step = controller.step
     name = controller.name
     rigid_model = veh.model == "rigid"
 
-    # Plain Python lists: indexing them is far cheaper than numpy scalars in the loop.
-    R = ref.pos.tolist()
-    A = (ref.acc if controller.feeds_acceleration else np.zeros_like(ref.acc)).tolist()
-    YR, PR = ref.yaw_deg.tolist(), ref.pitch_deg.tolist()
-    YF = np.gradient(ref.yaw_deg, dt).tolist()  # set-point rates, fed forward
-    PF = np.gradient(ref.pitch_deg, dt).tolist()
-    WX = wind.extra.tolist()
-    GR = np.asarray(ground_under_ref, float).tolist()
-    npos = nav.pos_error.tolist()
-    nvel = nav.vel_error.tolist()
-    WK = np.zeros((n, 3)).tolist() if wake is None else np.asarray(wake, float).tolist()
+    # Plain Python lists: indexing them is far cheaper than numpy scalars in the loop. They take
+    # ~150 bytes a row (a list and its float objects), so they are made a block at a time: the
+    # reference's rows from the set-point's index (it lags the step with the leash), the
+    # navigation errors and the wind from the step's.
+    acc = ref.acc if controller.feeds_acceleration else None
+    yaw_rate = np.gradient(ref.yaw_deg, dt)  # set-point rates, fed forward
+    pitch_rate = np.gradient(ref.pitch_deg, dt)
+    ground = np.asarray(ground_under_ref, float)
+    wake_a = None if wake is None else np.asarray(wake, float)
+
+    def ref_rows(r: int):
+        """Rows [r, r + block] of the reference (r + 1 is where the leash interpolates to), and
+        the first index past which they must be made again."""
+        hi = min(n, r + block + 1)
+        top = hi - 1 if hi < n else n
+        m = hi - r
+        return (r, top, ref.pos[r:hi].tolist(), ref.vel[r:hi].tolist(),
+                [[0.0, 0.0, 0.0]] * m if acc is None else acc[r:hi].tolist(),
+                ref.yaw_deg[r:hi].tolist(), ref.pitch_deg[r:hi].tolist(),
+                yaw_rate[r:hi].tolist(), pitch_rate[r:hi].tolist(), ground[r:hi].tolist(),
+                [[0.0, 0.0, 0.0]] * m if wake_a is None else wake_a[r:hi].tolist())
+
+    def step_rows(k: int):
+        """Rows [k, k + block) of the navigation errors and (kinematic model) the wind."""
+        hi = min(n, k + block)
+        return (k, hi, nav.pos_error[k:hi].tolist(), nav.vel_error[k:hi].tolist(),
+                None if rigid_model else wind.extra[k * sub:hi * sub].tolist())
+
+    rlo, rtop, R, V, A, YR, PR, YF, PF, GR, WK = ref_rows(0)
+    klo, khi, npos, nvel, WX = step_rows(0)
     ux_, uy_, _ = wind.unit.tolist()
     wspd, href, alpha = scn.wind.speed_ms, scn.wind.reference_height_m, scn.wind.shear_exponent
 
@@ -260,28 +292,42 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
     px, py, pz = R[0]
     vx = vy = vz = 0.0
     yaw, pit = YR[0], PR[0]
-    out_p, out_v, out_t, out_w, out_y, out_g = [], [], [], [], [], []
+    # The track a block at a time: lists while the block is flown, then arrays.
+    out = out_p, out_v, out_t, out_w, out_y, out_g, prog = [], [], [], [], [], [], []
+    flown: list[list[np.ndarray]] = [[] for _ in out]
+
+    def keep() -> None:
+        if out_p:
+            for o, f in zip(out, flown):
+                f.append(np.array(o, float))
+                o.clear()
+
     tx = ty = tz = 0.0
     wx = wy = wz = 0.0
     lost2 = ctl.divergence_m ** 2 if controller.holds_position else math.inf
     leash = float(getattr(ctl, "leash_m", 0.0) or 0.0) if controller.holds_position else 0.0
-    V = ref.vel.tolist()
     sig = 0.0  # the set-point's fractional index into the reference (leash only)
     ef, lf = 0.0, dt / (LEASH_FILTER_S + dt)
     last_i = n - 1
     end_i, settle_n, k_end = ref.end_index, int(round(SETTLE_S / dt)), -1
-    prog = []
 
     for k in range(n):
-        nx, ny, nz = npos[k]
-        mvx, mvy, mvz = nvel[k]
+        if k >= khi:
+            keep()
+            klo, khi, npos, nvel, WX = step_rows(k)
+        kk = k - klo
+        nx, ny, nz = npos[kk]
+        mvx, mvy, mvz = nvel[kk]
         ex_p, ey_p, ez_p = px + nx, py + ny, pz + nz
         if leash:
             i = int(sig)
-            j1 = i + 1 if i < last_i else i
+            if i >= rtop:
+                rlo, rtop, R, V, A, YR, PR, YF, PF, GR, WK = ref_rows(i)
+            ir = i - rlo
+            j1 = ir + 1 if i < last_i else ir
             f = sig - i
             g = 1.0 - f
-            r0, r1, v0, v1 = R[i], R[j1], V[i], V[j1]
+            r0, r1, v0, v1 = R[ir], R[j1], V[ir], V[j1]
             rx = g * r0[0] + f * r1[0]
             ry = g * r0[1] + f * r1[1]
             rz = g * r0[2] + f * r1[2]
@@ -293,29 +339,34 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
                   rate * (g * v0[2] + f * v1[2]))
             cx, cy, cz = step(k, (ex_p, ey_p, ez_p), (vx + mvx, vy + mvy, vz + mvz),
                               (px, py, pz), sp)
-            a0, a1 = A[i], A[j1]
+            a0, a1 = A[ir], A[j1]
             r2 = rate * rate
             arx, ary, arz = (r2 * (g * a0[0] + f * a1[0]), r2 * (g * a0[1] + f * a1[1]),
                              r2 * (g * a0[2] + f * a1[2]))
             kr = i  # the wake, ground and camera set-points where the set-point is
             prog.append(sig)
+            at_sig = sig
             sig = sig + rate if sig + rate < last_i else float(last_i)
         else:
+            if k >= rtop:
+                rlo, rtop, R, V, A, YR, PR, YF, PF, GR, WK = ref_rows(k)
             cx, cy, cz = step(k, (ex_p, ey_p, ez_p), (vx + mvx, vy + mvy, vz + mvz),
                               (px, py, pz))
-            arx, ary, arz = A[k]
+            ir = k - rlo
+            arx, ary, arz = A[ir]
             kr, rate = k, 1.0
-        agl = pz - GR[kr]
+        agl = pz - GR[ir]
         shear = wspd * ((agl if agl > 1.0 else 1.0) / href) ** alpha if wspd > 0 else 0.0
-        kx, ky, kz = WK[kr]
+        kx, ky, kz = WK[ir]
         mwx, mwy = shear * ux_ + kx, shear * uy_ + ky
         if rigid_model:
             kernel(S, cx, cy, cz, arx, ary, arz, W, k * sub, sub, mwx, mwy, kz, P, dtp, last)
             px, py, pz, vx, vy, vz = S[0], S[1], S[2], S[3], S[4], S[5]
             tx, ty, tz, wx, wy, wz = last
         else:
+            k0 = kk * sub
             for s in range(sub):
-                ex_ = WX[k * sub + s]
+                ex_ = WX[k0 + s]
                 wx, wy, wz = mwx + ex_[0], mwy + ex_[1], kz + ex_[2]
                 # Thrust: the acceleration asked for plus the vehicle's own still-air drag.
                 sp = math.sqrt(vx * vx + vy * vy + vz * vz)
@@ -341,9 +392,9 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
                 py += vy * dtp
                 pz += vz * dtp
         # Camera heading and gimbal: rate feed-forward plus first-order tracking, rate-limited.
-        d = rate * YF[kr] + (YR[kr] - yaw) / yr_tau
+        d = rate * YF[ir] + (YR[ir] - yaw) / yr_tau
         yaw += (yr_rate if d > yr_rate else -yr_rate if d < -yr_rate else d) * dt
-        d = rate * PF[kr] + (PR[kr] - pit) / gp_tau
+        d = rate * PF[ir] + (PR[ir] - pit) / gp_tau
         pit += (gp_rate if d > gp_rate else -gp_rate if d < -gp_rate else d) * dt
         out_p.append((px, py, pz))
         out_v.append((vx, vy, vz))
@@ -354,7 +405,7 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
         if k % 25 == 0:
             _check_divergence(ref, kr, name, (px, py, pz), lost2, ctl.divergence_m)
         if leash:
-            if k_end < 0 and prog[-1] >= end_i - 1e-9:
+            if k_end < 0 and at_sig >= end_i - 1e-9:
                 k_end = k
             if k_end >= 0 and k - k_end >= settle_n:
                 break  # at the end and settled: the rest of the reference is slack
@@ -363,15 +414,19 @@ def fly(ref: Reference, scn: Scenario, wind: WindSeries, ground_under_ref: np.nd
             f"the set-point waited {(n - end_i) * dt:.0f} s for the vehicle and the route is still "
             f"unfinished ({name} controller, control.leash_m = {leash:g}): the wind may exceed "
             "what the vehicle can hold")
-    m = len(out_p)
-    pos = np.array(out_p)
+    keep()
+    cols = []
+    for j in range(len(flown)):  # one column at a time: never the blocks and all columns at once
+        cols.append(np.concatenate(flown[j]))
+        flown[j] = []
+    pos, vel, thrust, wnd, yaw_d, pitch_d, progress = cols
+    m = len(pos)
     if not np.isfinite(pos).all() or np.abs(pos).max() >= DIVERGED_M:
         bad = int(np.argmax(~np.isfinite(pos).all(1) | (np.abs(pos).max(1) >= DIVERGED_M)))
         raise SimulationError(f"flight diverged at t={ref.t[bad]:.1f} s ({name} controller); "
                               "check the gains and limits of the scenario")
-    return Track(t=ref.t[:m].copy(), pos=pos, vel=np.array(out_v), thrust=np.array(out_t),
-                 wind=np.array(out_w), yaw_deg=np.array(out_y), pitch_deg=np.array(out_g),
-                 progress=np.array(prog) if leash else None)
+    return Track(t=ref.t[:m].copy(), pos=pos, vel=vel, thrust=thrust, wind=wnd, yaw_deg=yaw_d,
+                 pitch_deg=pitch_d, progress=progress if leash else None)
 
 
 def _check_divergence(ref: Reference, k: int, name: str, p: tuple[float, float, float],
@@ -397,7 +452,7 @@ def make_controller(mode: str, ref: Reference, scn: Scenario,
     """The controller a flight kind is flown with: ``pid``, ``feedforward`` or ``pilot``."""
     veh, gains = scn.vehicle, scn.gains
     limits = VelocityLimits(veh.max_speed_ms, veh.max_climb_ms, veh.max_descent_ms)
-    R, V = ref.pos.tolist(), ref.vel.tolist()
+    R, V = Rows(ref.pos), Rows(ref.vel)
     if mode == "pid":
         return PidController(R, V, 1.0 / scn.control.control_hz, gains.kp, gains.ki, gains.kd,
                              gains.derivative_filter_s, gains.integral_limit_ms,

@@ -19,7 +19,7 @@ vehicle is downwind of a part:
 - A stopped rotor's feathered blades are slender; their wake is left out.
 
 The model is evaluated along the set-point, once per control step (the vehicle flies within a
-metre or two of it; the wake is metres wide), so the flight loop reads a precomputed list.
+metre or two of it; the wake is metres wide), so the flight loop reads a precomputed series.
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ wind speed at 20 ft. The spectra are turned into time series by Taylor's frozen-
 hypothesis: a hovering multirotor sees the field advected past it at the mean wind speed V. Both
 models' series are synthesised at once with an FFT (white noise shaped by the square root of
 the power spectrum and normalised to the exact variance), so the flight loop only reads a
-precomputed list. Discrete gusts are the MIL-F-8785C "1-cosine" shape, arriving as a seeded
+precomputed series. Discrete gusts are the MIL-F-8785C "1-cosine" shape, arriving as a seeded
 Poisson process along the mean wind direction.
 """
 
@@ -117,12 +117,14 @@ def gust_series(wind: Wind, n: int, dt: float, rng: np.random.Generator) -> tupl
         return out, []
     count = rng.poisson(wind.gust_rate_per_min * T / 60.0)
     starts = np.sort(rng.uniform(0, max(T - wind.gust_duration_s, dt), count))
-    t = np.arange(n) * dt
     d = wind.gust_duration_s
     for t0 in starts:
-        x = (t - t0) / d
+        # Only the samples around the gust: a long flight's series is millions of samples.
+        a = max(0, int(math.floor(t0 / dt)) - 1)
+        b = min(n, int(math.ceil((t0 + d) / dt)) + 2)
+        x = (np.arange(a, b) * dt - t0) / d
         on = (x >= 0) & (x <= 1)
-        out[on] += 0.5 * wind.gust_amplitude_ms * (1 - np.cos(2 * math.pi * x[on]))
+        out[a:b][on] += 0.5 * wind.gust_amplitude_ms * (1 - np.cos(2 * math.pi * x[on]))
     return out, [(float(s), d, wind.gust_amplitude_ms) for s in starts]
 
 
@@ -196,22 +198,30 @@ def kaimal_series(wind: Wind, heights: np.ndarray, dt: float, rng: np.random.Gen
         return out, params
     m = int(2 ** math.ceil(math.log2(max(n, 16) * 1.25)))
     omega = 2 * math.pi * np.fft.rfftfreq(m, dt)
+    if nb > 1:
+        x = (h - lo) / (hi - lo) * (nb - 1)
+        j = np.clip(np.floor(x).astype(int), 0, nb - 2)
+        f = x - j
+        del x
+        below, above = np.empty(n), np.empty(n)
     for i in range(3):
         spec = np.fft.rfft(rng.standard_normal(m))
-        bands = np.empty((nb, n))
+        # Each sample needs only the two bands around its height: keep those values as the bands
+        # are made, not every band's series (a band is a whole flight at the physics rate).
         for b, p in enumerate(params):
             sigma, L = ((p.sigma_u, p.L_u), (p.sigma_v, p.L_v), (p.sigma_w, p.L_w))[i]
             g2 = kaimal_psd(L, p.V)(omega)
             full = g2[0] + 2 * g2[1:-1].sum() + g2[-1]
-            bands[b] = sigma * np.fft.irfft(spec * np.sqrt(g2 * m / full), n=m)[:n]
-        if nb == 1:
-            out[:, i] = bands[0]
-        else:
-            x = (h - lo) / (hi - lo) * (nb - 1)
-            j = np.clip(np.floor(x).astype(int), 0, nb - 2)
-            f = x - j
-            cols = np.arange(n)
-            out[:, i] = (1 - f) * bands[j, cols] + f * bands[j + 1, cols]
+            band = sigma * np.fft.irfft(spec * np.sqrt(g2 * m / full), n=m)[:n]
+            if nb == 1:
+                out[:, i] = band
+                continue
+            lower = j == b
+            below[lower] = band[lower]
+            upper = j == b - 1
+            above[upper] = band[upper]
+        if nb > 1:
+            out[:, i] = (1 - f) * below + f * above
     return out, params
 
 
@@ -257,6 +267,11 @@ def make_wind(wind: Wind, turbulence_factor: float, n: int, dt: float, height_ag
         unit_t, lateral = np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
     else:
         unit_t = unit
-    extra = (turb[:, :1] + gust[:, None]) * unit_t + turb[:, 1:2] * lateral
+    # Column by column: (n, 3) temporaries of a long flight at the physics rate add up.
+    along = turb[:, 0] + gust
+    del gust
+    extra = np.empty((n, 3))
+    for c in range(3):
+        extra[:, c] = along * unit_t[c] + turb[:, 1] * lateral[c]
     extra[:, 2] += turb[:, 2]
     return WindSeries(unit=unit, dryden=p, gusts=gusts, extra=extra, kaimal=kaimal)
