@@ -3,7 +3,7 @@
 The ground stands where the plan's turbines and launch points stand (the "pads": each
 turbine's base and each route's launch point). Its level under a point is the height of the
 nearest pad, horizontally (the first of equally near ones): the planner's own ground
-(``wtcli.plan.clearance.Site.ground_z``, docs/plan.md "Checks before writing"), so a plan
+(``wtcli.plan.clearance.FlatGround``, docs/plan.md "Checks before writing"), so a plan
 whose bases stand at a real height (``wtinspect site`` writes them so) is flown over the
 ground it was planned over, not 40 m above a ground at z = 0. ``flat`` terrain is that level;
 ``hilly`` adds a sum of a few seeded plane waves of the given wavelength, scaled to the given
@@ -20,9 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from wtcli.fly.scenario import Terrain
+from wtcli.plan.clearance import FlatGround
 
 PAD_RADIUS_M = 60.0
-_CHUNK = 16384  # points per block of the nearest-pad search
 
 
 @dataclass(frozen=True)
@@ -32,6 +32,7 @@ class Ground:
     phase: np.ndarray  # (W,)
     scale: float
     pads: np.ndarray  # (T, 3) turbine bases, then launch points
+    flat: FlatGround  # the pads as the planner's ground
 
     @classmethod
     def build(cls, terrain: Terrain, pads: np.ndarray, seed: int) -> Ground:
@@ -42,7 +43,8 @@ class Ground:
         k = np.stack([kmag * np.cos(ang), kmag * np.sin(ang)], 1)
         phase = rng.uniform(0, 2 * math.pi, waves)
         scale = terrain.amplitude_m / math.sqrt(waves / 2) if terrain.kind == "hilly" else 0.0
-        return cls(terrain, k, phase, scale, np.asarray(pads, float).reshape(-1, 3))
+        pads = np.asarray(pads, float).reshape(-1, 3)
+        return cls(terrain, k, phase, scale, pads, FlatGround(pads))
 
     def _raw(self, xy: np.ndarray) -> np.ndarray:
         if self.scale == 0:
@@ -50,20 +52,12 @@ class Ground:
         return self.scale * np.sin(xy @ self.k.T + self.phase).sum(axis=1)
 
     def level(self, xy: np.ndarray) -> np.ndarray:
-        """The site's level under each point: the height of the nearest pad in x/y (the first
-        of equally near ones); 0 without pads."""
+        """The site's level under each point: the planner's flat ground (the height of the
+        nearest pad in x/y, the first of equally near ones); 0 without pads."""
         xy = np.atleast_2d(np.asarray(xy, float))[:, :2]
-        pads = self.pads
-        if not len(pads):
+        if not len(self.pads):
             return np.zeros(len(xy))
-        z = pads[:, 2]
-        if np.all(z == z[0]):
-            return np.full(len(xy), z[0])
-        out = np.empty(len(xy))
-        for s in range(0, len(xy), _CHUNK):
-            d2 = ((xy[s:s + _CHUNK, None, :] - pads[None, :, :2]) ** 2).sum(-1)
-            out[s:s + _CHUNK] = z[np.argmin(d2, axis=1)]
-        return out
+        return self.flat.z(xy)
 
     def height(self, xy: np.ndarray) -> np.ndarray:
         xy = np.atleast_2d(np.asarray(xy, float))[:, :2]

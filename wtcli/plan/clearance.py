@@ -104,8 +104,8 @@ class Site:
         ground = [t.base_xyz for t in self.turbines]
         if launch is not None:
             ground.append(np.asarray(launch, float))
-        self.ground_points = np.array(ground).reshape(-1, 3)
-        self._build_ground_grid()
+        self.ground = FlatGround(np.array(ground).reshape(-1, 3))
+        self.ground_points = self.ground.points
         self._hubs = np.array([t.hub_center for t in self.turbines]).reshape(-1, 3)
         self._build_grid()
         self._grid_args: tuple | None = None
@@ -353,12 +353,34 @@ class Site:
         return ok
 
     def ground_z(self, points: np.ndarray) -> np.ndarray:
-        """Ground level under each point: the height of the nearest turbine base or launch point
-        (a flat site around each of them; the first of equally near ones)."""
-        return self.ground_points[self.ground_index(points), 2]
+        """Ground level under each point (``FlatGround.z``)."""
+        return self.ground.z(points)
 
     def ground_index(self, points: np.ndarray) -> np.ndarray:
-        """Index (into ``ground_points``) of the ground point nearest each point in x/y, the
+        """Index (into ``ground_points``) of the ground point nearest each point in x/y
+        (``FlatGround.index``)."""
+        return self.ground.index(points)
+
+
+class FlatGround:
+    """The ground as the planner takes it, and ``fly`` flies over on flat terrain: flat
+    around each of its points (turbine bases, launch points), its level under a point the
+    height of the point nearest in x/y (the first of equally near ones)."""
+
+    def __init__(self, points: np.ndarray):
+        self.points = np.asarray(points, float).reshape(-1, 3)
+        self._build_grid()
+
+    def z(self, points: np.ndarray) -> np.ndarray:
+        """Ground level under each of ``points`` ((N, 2) or (N, 3); x/y used)."""
+        P = np.atleast_2d(np.asarray(points, float))
+        G = self.points
+        if len(G) and np.all(G[:, 2] == G[0, 2]):  # one level: no search
+            return np.full(len(P), G[0, 2])
+        return G[self.index(P), 2]
+
+    def index(self, points: np.ndarray) -> np.ndarray:
+        """Index (into ``points``) of the ground point nearest each point in x/y, the
         first of equally near ones. The points with one index form a convex region.
 
         The ground points in the 3 x 3 cells around each point's cell are compared (compiled,
@@ -366,21 +388,24 @@ class Site:
         point further out can be nearer (nor as near); elsewhere, and on small sites, all are."""
         from wtcli.plan import clearance_site_kernel
 
-        P = np.ascontiguousarray(np.atleast_2d(np.asarray(points, float)))
-        G = self.ground_points
+        P = np.atleast_2d(np.asarray(points, float))
+        if P.shape[1] == 2:
+            P = np.c_[P, np.zeros(len(P))]
+        P = np.ascontiguousarray(P)
+        G = self.points
         if len(G) == 0:
             return np.argmin(np.zeros((len(P), 0)), axis=1)  # numpy's own error
         return clearance_site_kernel.ground_index(P, G, np.asarray(self._g_origin, float), float(self._g_cell),
                                           np.asarray(self._g_shape, np.int64), self._g_start,
                                           self._g_members, len(G) <= GROUND_BRUTE_FORCE)
 
-    def _build_ground_grid(self) -> None:
+    def _build_grid(self) -> None:
         """Cells of the ground points (CSR: ``_g_start``, ``_g_members``), as large as the
         typical spacing of the points, so most queries find their nearest in 3 x 3 cells."""
-        G = self.ground_points[:, :2]
+        G = self.points[:, :2]
         self._g_origin = G.min(axis=0) if len(G) else np.zeros(2)
         span = (G.max(axis=0) - self._g_origin) if len(G) else np.zeros(2)
-        extent = float(span.max())
+        extent = float(span.max()) if len(G) else 0.0
         # Half the spacing of an even layout: 3 x 3 cells hold a few points, and the points the
         # planner asks about (within a rotor of a base) find theirs there. Any size is exact;
         # only the speed depends on it.
