@@ -9,6 +9,7 @@ then the result is frozen. A ``Mission`` can also be built in code, or from a di
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -17,6 +18,7 @@ import numpy as np
 import yaml
 
 from wtcli.errors import ConfigError
+from wtcli.jsonio import shown
 from wtcli.geometry import Camera, Turbine
 from wtcli.plan.geodesy import geodetic_to_enu
 from wtcli.yamlcheck import (merge, check_keys, load_yaml, need_mapping, number, string,
@@ -39,6 +41,7 @@ _DEFAULTS = default_dict()
 def _default(section: str, key: str) -> Any:
     return _DEFAULTS[section][key]
 
+UAV_ID = re.compile(r"(?!\.{1,2}$)[^/\\\x00-\x1f\x7f]{1,64}")
 TOP_KEYS = ("site", "camera", "fleet", "mission", "turbines")
 CAMERA_KEYS = ("sensor_width_mm", "focal_mm", "width_px", "height_px", "min_photo_interval_s",
                "shutter_s", "max_blur_px")
@@ -434,6 +437,12 @@ def mission_from_dict(d: Any, where: str = "turbines.yaml", base_dir: str | Path
         uav_ids = tuple(str(u) for u in uavs)
         if len(set(uav_ids)) != len(uav_ids):
             raise ConfigError(f"{w}.uavs: expected unique ids, got {uavs!r}")
+        for i, u in enumerate(uav_ids):
+            # an id names the export files (STEM_UAV_sN.plan): a file name's part, no path
+            if not UAV_ID.fullmatch(u):
+                raise ConfigError(f"{w}.uavs[{i}]: expected an id of 1-64 characters without "
+                                  f"'/', '\\' or control characters, not '.' or '..' (it names "
+                                  f"export files), got {shown(u)}")
     else:
         raise ConfigError(f"{w}.uavs: expected a count in [1, 50] or a list of ids, got {uavs!r}")
     launch = None

@@ -544,25 +544,26 @@ def _battery_words(fl) -> str:
             f"(1 + wind_margin {fl.wind_margin:g}) = {fl.sortie_limit_s / 60:.2f} min")
 
 
+SORTIE_RETRIES = 3  # plannings again of a route whose timed sortie overran the estimate
+SORTIE_SHRINK = 0.995  # ... each under the limit times this and its overrun
 SORTIE_CAP_STEPS = 12  # bisections of the balanced sorties' cap (sortie limit / 4096)
 
 
-def _balanced_cap(job: tuple) -> float | None:
-    """The least battery cap that flies ``job``'s route in as many sorties as the whole sortie
-    limit does (bisected on dry runs): the same battery changes, each sortie as short as they
-    allow, so more than the wind margin is left for wind rather than the first sortie filled to
-    the brim and the last one short. None for a route of one sortie."""
-    mission = job[3]
-    usable = mission.fleet.sortie_limit_s
+def _balanced_cap(job: tuple, usable: float) -> float:
+    """The least battery cap that flies ``job``'s route in as many sorties as the cap
+    ``usable`` (the sortie limit) does (bisected on dry runs): the same battery changes, each
+    sortie as short as they allow, so more than the wind margin is left for wind rather than
+    the first sortie filled to the brim and the last one short. ``usable`` for a route of one
+    sortie."""
 
     def count(cap: float | None) -> int:  # a chunk too long for any battery raises either way
         n: list = []
         build_route(*job, missing=[], cap=cap, sorties=n)
         return n[0]
 
-    want = count(None)
+    want = count(usable)
     if want <= 1:
-        return None
+        return usable
     lo, hi = 0.0, usable
     for _ in range(SORTIE_CAP_STEPS):
         mid = 0.5 * (lo + hi)
@@ -1003,20 +1004,35 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
     # until the dry runs ask for nothing new (the battery decisions then rest on flown legs).
     # Each UAV's sorties balanced: the least cap that keeps its number of battery changes,
     # found again as legs get connected (their detours are flown, so they count).
-    caps: dict[str, float | None] = {}
-    for rounds in range(MAX_LEG_ROUNDS):
-        missing: list = []
-        for job in jobs:
-            caps[job[0]] = _balanced_cap(job)
-            build_route(*job, missing=missing, cap=caps[job[0]])
-        legs = {(p.tobytes(), q.tobytes()): (site_plan, p, q, pp.leg_required, s.min_altitude_m)
-                for p, q in missing}
-        tick = stage_ticker(progress, "legs", len(legs)) if rounds == 0 else (lambda: None)
-        if not legs:
+    # A route is timed more exactly than its battery decisions estimate it (camera turns on the
+    # transits): a sortie the timing finds over the limit is planned again under a limit
+    # shrunk by its overrun, a few times at most, before the plan is refused.
+    limits = {job[0]: fl.sortie_limit_s for job in jobs}
+    caps: dict[str, float] = {}
+    todo, routes_by = list(jobs), {}
+    for _ in range(SORTIE_RETRIES + 1):
+        for rounds in range(MAX_LEG_ROUNDS):
+            missing: list = []
+            for job in todo:
+                caps[job[0]] = _balanced_cap(job, limits[job[0]])
+                build_route(*job, missing=missing, cap=caps[job[0]])
+            legs = {(p.tobytes(), q.tobytes()): (site_plan, p, q, pp.leg_required, s.min_altitude_m)
+                    for p, q in missing}
+            tick = stage_ticker(progress, "legs", len(legs)) if not routes_by and rounds == 0 \
+                else (lambda: None)
+            if not legs:
+                break
+            links.update(_map(_link, list(legs.values()), workers, tick))
+        tick = stage_ticker(progress, "routes", len(todo)) if not routes_by else (lambda: None)
+        built = _map(_route, [(*job, None, caps[job[0]]) for job in todo], workers, tick)
+        routes_by.update((r.uav, r) for r in built)
+        over = [r for r in built if r.summary["longest_sortie_s"] > fl.sortie_limit_s + 1e-6]
+        for r in over:
+            limits[r.uav] *= SORTIE_SHRINK * fl.sortie_limit_s / r.summary["longest_sortie_s"]
+        todo = [job for job in todo if job[0] in {r.uav for r in over}]
+        if not todo:
             break
-        links.update(_map(_link, list(legs.values()), workers, tick))
-    jobs = [(*job, None, caps.get(job[0])) for job in jobs]  # (..., missing, cap)
-    routes = _map(_route, jobs, workers, stage_ticker(progress, "routes", len(jobs)))
+    routes = [routes_by[job[0]] for job in jobs]
     over = [(r.uav, r.summary["longest_sortie_s"]) for r in routes
             if r.summary["longest_sortie_s"] > fl.sortie_limit_s + 1e-6]
     if over:
