@@ -570,6 +570,29 @@ def test_cli_plan_for_an_underslung_gimbal_says_so_and_exports_within_it(cli, tm
     assert pitches and max(pitches) <= 30.0
 
 
+def test_cli_reexport_replaces_the_earlier_set_and_says_so(cli, tmp_path):
+    """A plan of 3 sorties (18 min battery), then the sample's plan of 2 into the same folder:
+    only the second plan's files are left, and stderr says what was replaced and removed."""
+    y = tmp_path / "short.yaml"
+    y.write_text(SAMPLE.read_text().replace("battery_minutes: 30", "battery_minutes: 18"))
+    exp = tmp_path / "exp"
+    exp.mkdir()
+    (exp / "notes.txt").write_text("the user's\n")
+    r = cli("plan", y, "--out", tmp_path / "plan.json", "--export-dir", exp, "--dji-kmz", "m30")
+    assert r.exit_code == 0, r.output
+    first = sorted(p.name for p in exp.iterdir())
+    assert "plan_UAV1_s3.kmz" in first
+    r = cli("plan", SAMPLE, "--out", tmp_path / "plan.json", "--export-dir", exp)
+    assert r.exit_code == 0, r.output
+    names = sorted(p.name for p in exp.iterdir())
+    assert names == ["notes.txt", "plan.geojson", "plan_UAV1_s1.plan", "plan_UAV1_s1.waypoints",
+                     "plan_UAV1_s2.plan", "plan_UAV1_s2.waypoints"]
+    line, = [ln for ln in r.stderr.splitlines() if ln.startswith("exports:")]
+    assert line == (f"exports: 5 file(s) -> {exp} (replaced the earlier export of plan: "
+                    f"{len(first) - 1} file(s); removed 5 this plan has not: plan_UAV1_s1.kmz, "
+                    "plan_UAV1_s2.kmz, plan_UAV1_s3.kmz and 2 more)")
+
+
 def test_cli_json_is_one_document(cli):
     r = cli("plan", SAMPLE, "--json")
     assert r.exit_code == 0

@@ -167,7 +167,7 @@ def test_real_plan_exports_parse(tmp_path):
 
     root = Path(__file__).resolve().parents[1]
     plan = plan_mission(load_mission(root / "sample_images" / "turbines.yaml"))
-    files = export_all(plan, tmp_path, stem="m")
+    files = export_all(plan, tmp_path, stem="m").written
     n_photos = 0
     for f in files:
         if f.suffix == ".waypoints":
@@ -249,7 +249,7 @@ def test_exports_agree_with_an_independent_wgs84_conversion_on_a_10_km_site(tmp_
     plan = wide_plan()
     r = plan.routes[0]
     truth = _textbook_enu_to_llh(r.pos, WIDE_ORIGIN)
-    files = export_all(plan, tmp_path, stem="w")
+    files = export_all(plan, tmp_path, stem="w").written
     rows = parse_wpl((tmp_path / "w_UAV1_s1.waypoints").read_text())
     home = np.array(rows[0]["params"][4:7])
     wp = np.array([row["params"][4:7] for row in rows[1:] if row["command"] in (22, 16, 21)])
@@ -460,11 +460,11 @@ def _wrap(deg):
 def test_dji_kmz_parses_back_to_the_plan_and_matches_golden(tmp_path):
     plan = _dji_plan()
     r = plan.routes[0]
-    files = export_all(plan, tmp_path, stem="small", dji="m350-p1")
+    files = export_all(plan, tmp_path, stem="small", dji="m350-p1").written
     kmz = sorted(f for f in files if f.suffix == ".kmz")
     assert [f.name for f in kmz] == ["small_UAV1_s1.kmz", "small_UAV1_s2.kmz"]
-    assert kmz[0].read_bytes() == export_all(plan, tmp_path / "again", stem="small",
-                                             dji="m350-p1")[0].read_bytes(), "same plan, same bytes"
+    again = export_all(plan, tmp_path / "again", stem="small", dji="m350-p1").written
+    assert kmz[0].read_bytes() == again[0].read_bytes(), "same plan, same bytes"
     truth = _textbook_enu_to_llh(r.pos, ORIGIN)
     for s, ((a, b), path) in enumerate(zip(sorties(r), kmz), start=1):
         template, waylines = _read_kmz(path)
@@ -537,7 +537,8 @@ def test_dji_kmz_flies_a_photo_pass_without_stopping(tmp_path):
     1 s per photo to what the plan says (16.8 min a turbine instead of 10)."""
     plan = _pass_plan()
     r = plan.routes[0]
-    (path,) = [f for f in export_all(plan, tmp_path, stem="pass", dji="m350-p1") if f.suffix == ".kmz"]
+    (path,) = [f for f in export_all(plan, tmp_path, stem="pass", dji="m350-p1").written
+               if f.suffix == ".kmz"]
     template, waylines = _read_kmz(path)
     _golden("pass_s1.template.kml", template)
     _golden("pass_s1.waylines.wpml", waylines)
@@ -567,14 +568,16 @@ def test_dji_kmz_for_every_aircraft_and_the_sample_site(tmp_path):
 
     plan = _dji_plan()
     for key, ac in AIRCRAFT.items():
-        (path,) = [f for f in export_all(plan, tmp_path / key, dji=key) if f.suffix == ".kmz"][:1]
+        (path,) = [f for f in export_all(plan, tmp_path / key, dji=key).written
+                   if f.suffix == ".kmz"][:1]
         w = parse_wpml(_read_kmz(path)[1], template=False)
         assert w["drone"] == (ac.drone_enum, ac.drone_sub_enum) and w["payload"] == ac.payload_enum
     root = Path(__file__).resolve().parents[1]
     mission = load_mission(root / "sample_images" / "turbines.yaml")
     real = plan_mission(mission)
     files = export_all(real, tmp_path / "real", stem="m", dji="m30t",
-                       cruise=mission.fleet.cruise_speed_m_s, hover=mission.fleet.inspection_speed_m_s)
+                       cruise=mission.fleet.cruise_speed_m_s,
+                       hover=mission.fleet.inspection_speed_m_s).written
     photos = in_flight = 0
     for f in files:
         if f.suffix == ".kmz":
@@ -630,3 +633,117 @@ def test_pymavlink_reads_every_waypoints_file_we_write(tmp_path):
                     assert got[6] == pytest.approx(want[6], abs=1e-3)
                 n_files += 1
     assert n_files >= 4
+
+
+# ---- one export set per stem ----------------------------------------------------------------------
+def _one_sortie_plan() -> Plan:
+    """small_plan cut after its first landing: one sortie where small_plan has two."""
+    p = small_plan()
+    r = p.routes[0]
+    k = 6
+    route = Route(r.uav, t=r.t[:k], pos=r.pos[:k], speed=r.speed[:k], yaw_deg=r.yaw_deg[:k],
+                  gimbal_pitch_deg=r.gimbal_pitch_deg[:k], photo=r.photo[:k],
+                  component=r.component[:k])
+    return Plan(p.turbines, p.camera, [route], 3.0, 1.5, ORIGIN, {})
+
+
+def _snapshot(folder: Path) -> dict[str, bytes]:
+    """Every file under ``folder`` (hidden ones too) and its bytes."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file()}
+
+
+def test_a_reexport_with_fewer_sorties_leaves_only_this_plans_files(tmp_path):
+    """A plan of 1 sortie exported over one of 2 leaves no plan_UAV1_s2.* beside it (a sortie
+    of another plan a pilot could fly). Other stems' exports and the user's files stay."""
+    d = tmp_path / "exp"
+    export_all(small_plan(), d, stem="plan", dji="m350-p1")
+    export_all(small_plan(), d, stem="other")
+    for name in ("notes.txt", "plan.json", "plan_UAV1_s2.txt", "plan_UAV1_s2.plan.bak"):
+        (d / name).write_text("the user's\n")
+    earlier = {"plan.geojson"} | {f"plan_UAV1_s{s}.{x}" for s in (1, 2)
+                                  for x in ("plan", "waypoints", "kmz")}
+    kept = {k: v for k, v in _snapshot(d).items() if k not in earlier}
+    done = export_all(_one_sortie_plan(), d, stem="plan")
+    assert sorted(p.name for p in done.written) == ["plan.geojson", "plan_UAV1_s1.plan",
+                                                     "plan_UAV1_s1.waypoints"]
+    assert sorted(p.name for p in done.removed) == [
+        "plan_UAV1_s1.kmz", "plan_UAV1_s2.kmz", "plan_UAV1_s2.plan", "plan_UAV1_s2.waypoints"]
+    assert sorted(p.name for p in done.replaced) == sorted(p.name for p in done.written)
+    after = _snapshot(d)
+    assert sorted(k for k in after if k not in kept) == sorted(p.name for p in done.written)
+    assert {k: after[k] for k in kept} == kept, "other stems' exports and user files untouched"
+    assert parse_wpl((d / "plan_UAV1_s1.waypoints").read_text())[-1]["command"] == 21
+    fresh = export_all(_one_sortie_plan(), tmp_path / "fresh", stem="plan")
+    assert not fresh.replaced and not fresh.removed
+    assert _snapshot(tmp_path / "fresh") == {p.name: after[p.name] for p in done.written}
+
+
+@pytest.mark.parametrize("failure", ["full disk", "ctrl-c"])
+def test_an_export_that_fails_part_way_leaves_the_earlier_set_whole(tmp_path, monkeypatch, failure):
+    """A disk filling (or Ctrl-C) part-way through a re-export changes nothing in the folder:
+    no sortie files of two plans side by side, no staging folder left."""
+    import wtcli.plan.exports as exports
+    from wtcli.errors import OutputError
+
+    d = tmp_path / "exp"
+    export_all(small_plan(), d, stem="plan", dji="m350-p1")
+    (d / "notes.txt").write_text("the user's\n")
+    before = _snapshot(d)
+    real, calls = exports._stage, []
+
+    def stage(tmp, final, data):
+        calls.append(final.name)
+        if len(calls) == 3:
+            if failure == "ctrl-c":
+                raise KeyboardInterrupt
+            real(tmp.parent / "gone" / tmp.name, final, data)  # a real OSError from the write
+        real(tmp, final, data)
+
+    monkeypatch.setattr(exports, "_stage", stage)
+    with pytest.raises(KeyboardInterrupt if failure == "ctrl-c" else OutputError) as e:
+        export_all(_one_sortie_plan(), d, stem="plan", dji="m30")
+    if failure == "full disk":
+        assert str(e.value).startswith(f"{d / calls[2]}: cannot write ("), "names the file"
+    assert _snapshot(d) == before, "the earlier set whole, no staging folder left"
+
+
+def test_files_another_stem_may_own_are_left_to_it(tmp_path):
+    """UAV ids may hold "_", so plan_UAV1_UAV1_s1.plan could be stem plan's (UAV "UAV1_UAV1")
+    or stem plan_UAV1's (UAV "UAV1"): the other stem's map (its .geojson) says which."""
+    d = tmp_path
+    export_all(small_plan(), d, stem="plan_UAV1")
+    theirs = _snapshot(d)
+    export_all(small_plan(), d, stem="plan")
+    done = export_all(_one_sortie_plan(), d, stem="plan")
+    assert sorted(p.name for p in done.removed) == ["plan_UAV1_s2.plan", "plan_UAV1_s2.waypoints"]
+    assert {k: v for k, v in _snapshot(d).items() if k in theirs} == theirs
+    # The other way round: site's map has no UAV "north_UAV1", so those files are site_north's.
+    export_all(small_plan(), d, stem="site_north")
+    export_all(small_plan(), d, stem="site")
+    done = export_all(_one_sortie_plan(), d, stem="site_north")
+    assert sorted(p.name for p in done.removed) == ["site_north_UAV1_s2.plan",
+                                                    "site_north_UAV1_s2.waypoints"]
+    assert (d / "site_UAV1_s2.plan").is_file()
+
+
+def test_a_folder_in_the_way_is_refused_before_the_earlier_set_is_touched(tmp_path):
+    from wtcli.errors import OutputError
+
+    export_all(small_plan(), tmp_path, stem="plan")
+    (tmp_path / "plan_UAV1_s2.plan").unlink()
+    (tmp_path / "plan_UAV1_s2.plan").mkdir()
+    before = _snapshot(tmp_path)
+    with pytest.raises(OutputError, match=r"s2\.plan: cannot write \(a folder is in the way\)"):
+        export_all(small_plan(), tmp_path, stem="plan")
+    assert _snapshot(tmp_path) == before
+
+
+def test_a_uav_id_that_is_not_a_file_name_is_refused(tmp_path):
+    import dataclasses
+
+    p = small_plan()
+    p = dataclasses.replace(p, routes=[dataclasses.replace(p.routes[0], uav="../UAV1")])
+    with pytest.raises(ConfigError, match=r"fleet.uavs: '../UAV1' cannot be part of a file name"):
+        export_all(p, tmp_path / "exp")
+    assert not list(tmp_path.iterdir())

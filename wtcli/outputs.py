@@ -4,7 +4,11 @@
   can be written (a folder is created and a probe file written and removed), so a read-only
   ``--out`` fails in a second, not after the model has run.
 - Every write goes through ``jsonio.atomic_write_*``: an OSError becomes ``OutputError`` naming
-  the file (exit 3, docs/exit-codes.md), and no half-written file is ever visible.
+  the file (exit 3, docs/exit-codes.md), and no half-written file is ever visible. A set of
+  files that must not mix with an earlier one (``plan``'s mission exports) goes through a
+  staging folder instead (``wtcli.plan.exports``).
+- ``check_not_inputs`` refuses an output that is one of the command's own inputs (usage,
+  exit 2): writing it would replace what the user gave.
 - ``remove_temp_files`` clears the ``.NAME.XXXXXXXX`` temporaries a kill between write and
   rename leaves behind; ``remove_stale`` drops an aggregate a rerun no longer vouches for.
 """
@@ -19,7 +23,7 @@ import unicodedata
 from pathlib import Path, PurePosixPath
 from typing import Iterable
 
-from wtcli.errors import OutputError
+from wtcli.errors import OutputError, UsageError
 from wtcli.jsonio import write_failed
 
 # jsonio.atomic_write_bytes names its temporaries tempfile.mkstemp(prefix=".NAME."): a dot,
@@ -128,6 +132,40 @@ def check_outputs(files: Iterable[str | Path | None] = (),
     for d in folders:
         if d is not None:
             writable_folder(d, "output folder")
+
+
+def _identity(path: str | Path) -> tuple:
+    """What names one file: device and inode for one that exists (a symbolic or hard link to
+    it has the same), else where the path resolves to (an output not written yet)."""
+    try:
+        st = os.stat(path)
+        return ("inode", st.st_dev, st.st_ino)
+    except OSError:  # missing or unreadable
+        return ("path", os.path.realpath(path))
+
+
+def same_file(a: str | Path, b: str | Path) -> bool:
+    """Whether two paths name one file: the same path, a symbolic link to it or a hard link
+    of it."""
+    return _identity(a) == _identity(b)
+
+
+def check_not_inputs(outputs: Iterable[tuple[str, str | Path | None]],
+                     inputs: Iterable[tuple[str, str | Path | None]]) -> None:
+    """Refuse (UsageError, exit 2) an output that is one of the command's inputs, before any
+    work: an atomic write would silently replace the input with the output. ``outputs`` pairs
+    the option with the path it writes (``("--out", out)``); ``inputs`` pairs what an input is
+    with its path (``("the input turbines file", yaml)``). None: not given."""
+    given: dict[tuple, tuple[str, str | Path]] = {}
+    for what, p in inputs:
+        if p is not None:
+            given.setdefault(_identity(p), (what, p))
+    for option, out in outputs:
+        if out is None or _identity(out) not in given:
+            continue
+        what, inp = given[_identity(out)]
+        also = "" if os.path.normpath(str(inp)) == os.path.normpath(str(out)) else f" ({inp})"
+        raise UsageError(f"{option} {out}: is {what}{also}; choose another output")
 
 
 def _fold(name: str) -> str:

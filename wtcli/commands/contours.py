@@ -11,7 +11,7 @@ from wtcli.console import err_console, stage_bars
 from wtcli.contours import DEFAULT_AREA_THRESHOLD, contours_batch
 from wtcli.errors import PartialFailure, PerceptionError
 from wtcli.jsonio import dumps, write_json
-from wtcli.outputs import check_outputs
+from wtcli.outputs import check_not_inputs, check_outputs
 
 
 def register(app: typer.Typer) -> None:
@@ -28,6 +28,7 @@ def register(app: typer.Typer) -> None:
         json_out: bool = typer.Option(False, "--json", help="Print the contours JSON on stdout."),
     ) -> None:
         """Binarise instance masks, find their contours and drop small ones (eq. 4-6)."""
+        check_not_inputs([("--out", out)], [("an input file", p) for p in inputs])
         check_outputs(files=[out])
         with stage_bars({"images": "contours"}) as progress:
             batch = contours_batch(inputs, area_threshold, progress)

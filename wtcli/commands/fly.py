@@ -114,8 +114,12 @@ def register(app: typer.Typer) -> None:
         from wtcli.fly.flight import describe
         from wtcli.fly.scenario import load_scenario, resolve_scenario
         from wtcli.jsonio import document, dumps, write_json
-        from wtcli.outputs import check_outputs
+        from wtcli.outputs import check_not_inputs, check_outputs
 
+        given = [("the input plan", plan)]
+        if scenario is not None and not paper:  # --paper-table flies its own scenarios
+            given.append(("the scenario file", resolve_scenario(scenario)))
+        check_not_inputs([("--out", out)], given)
         check_outputs(files=[out], folders=[pictures])  # before flying, not after
         if paper:
             from wtcli.fly.run import mean_changes, paper_table

@@ -51,7 +51,9 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Measure each blade's angle θ, its class and its direction φ hub -> tip (eq. 7)."""
         paths = [Path(p) for p in inputs]
-        from wtcli.outputs import check_outputs
+        from wtcli.outputs import check_not_inputs, check_outputs
+        given = [("an input file", p) for p in paths] + [("the --image photo", image)]
+        check_not_inputs([("--out", out)], given)
         check_outputs(files=[out], folders=[overlay_dir])  # before the work, not after
         photos = bool(paths) and all(is_photo(p) for p in paths)
         if photos:  # segment -> contours -> pitch, photo by photo (wtcli.chain)
@@ -71,6 +73,11 @@ def register(app: typer.Typer) -> None:
             n_images = len(loaded)
         if image is not None and n_images != 1:
             raise InputError(f"--image needs an input with one image, got {n_images}")
+        if overlay_dir is not None:  # an overlay over an input photo or mask would replace it
+            records = [{"file_name": p.name} for p in paths] if photos else \
+                [inp.image for inp in loaded]
+            check_not_inputs([("--overlay-dir file", overlay_dir / n)
+                              for n in overlay_names(records)], given)
         if n_images > 1 and err_console.is_terminal:
             with make_progress(transient=True) as progress:
                 task = progress.add_task("pitch", total=n_images, status="")

@@ -28,6 +28,20 @@ def _pose(text: str | None):
     return CameraPose(tuple(v[:3]), tuple(v[3:6]), v[6] if len(v) == 7 else 0.0)
 
 
+def _replaced_text(done, stem: str) -> str:
+    """The end of the exports line: what became of an earlier export of the same stem, so a
+    pilot knows the folder holds this plan alone."""
+    earlier = len(done.replaced) + len(done.removed)
+    if not earlier:
+        return ""
+    text = f" (replaced the earlier export of {stem}: {earlier} file(s)"
+    if done.removed:
+        names = [p.name for p in done.removed]
+        more = f" and {len(names) - 3} more" if len(names) > 3 else ""
+        text += f"; removed {len(names)} this plan has not: {', '.join(names[:3])}{more}"
+    return text + ")"
+
+
 # What each of plan_mission's stages (wtcli.plan.mission.STAGES) does, for the progress bar.
 PICTURE_SUFFIXES = (".png", ".jpg", ".jpeg")
 PLAN_STAGE_TEXT = {"turbines": "trajectories", "legs": "legs between turbines", "routes": "UAV routes",
@@ -97,11 +111,18 @@ def register(app: typer.Typer) -> None:
                 aircraft(dji_kmz)
                 if export_dir is None:
                     raise ConfigError("--dji-kmz needs --export-dir (where to write the .kmz files)")
-            from wtcli.outputs import check_outputs
+            from wtcli.outputs import check_not_inputs, check_outputs
+            given = [("the input turbines file", turbines_yaml)] + [
+                ("an input photo or pitch file", Path(p)) for a in inputs or []
+                for p in {a, a.partition("=")[2] or a}]  # ID=FILE: the file; a name may hold "="
+            written = [("--out", out), ("--picture", picture)]
+            check_not_inputs(written, given)
             check_outputs(files=[out, picture], folders=[export_dir])  # before planning, not after
             if picture is not None and picture.suffix.lower() not in PICTURE_SUFFIXES:
                 raise UsageError(f"--picture {picture}: expected a .png or .jpg file name")
             mission = load_mission(turbines_yaml)
+            check_not_inputs(written, [(f"turbine {t.id}'s photo in {turbines_yaml}",
+                                        mission.extra(t.id).photo) for t in mission.turbines])
             if export_dir is not None and not mission.site_origin:  # the exports are lat/lon
                 raise ConfigError(f"{turbines_yaml}: --export-dir writes lat/lon and needs "
                                   "site.origin (lat, lon, alt) in it")
@@ -117,10 +138,11 @@ def register(app: typer.Typer) -> None:
                 write_plan(out, result)
             if export_dir is not None:
                 fl = mission.fleet
-                files = export_all(result, export_dir, stem=(out.stem if out else "mission"),
-                                   cruise=fl.cruise_speed_m_s, hover=fl.inspection_speed_m_s,
-                                   dji=dji_kmz)
-                err_console.print(f"exports: {len(files)} file(s) -> {export_dir}", soft_wrap=True)
+                stem = out.stem if out else "mission"
+                done = export_all(result, export_dir, stem=stem, cruise=fl.cruise_speed_m_s,
+                                  hover=fl.inspection_speed_m_s, dji=dji_kmz)
+                err_console.print(f"exports: {len(done.written)} file(s) -> {export_dir}"
+                                  + _replaced_text(done, stem), soft_wrap=True)
             if picture is not None:  # encoded as its name says
                 ok, buf = cv2.imencode(picture.suffix.lower(), draw_plan(result))
                 atomic_write_bytes(picture, buf.tobytes())

@@ -55,9 +55,11 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Build a turbines.yaml from a turbine list you already have (USWTDB, OpenStreetMap)."""
         from wtcli.jsonio import atomic_write_text
+        from wtcli.outputs import check_not_inputs
         from wtcli.plan.config import mission_from_dict
         from wtcli.site import build_site
 
+        check_not_inputs([("--out", out)], [("the input turbine list", source)])
         s = build_site(source, project=project, bbox=_bbox(bbox), origin=origin,
                        origin_alt_m=origin_alt, yaw_deg=yaw_deg, hub_default=hub_height,
                        diam_default=rotor_diameter)

@@ -21,15 +21,20 @@ ArduPilot's 196 DO_SET_ROI_WPNEXT_OFFSET is never used.
 
 from __future__ import annotations
 
+import errno
 import json
 import math
+import os
+import re
+import shutil
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from wtcli.errors import ConfigError
-from wtcli.jsonio import atomic_write_bytes, atomic_write_text
+from wtcli.errors import ConfigError, OutputError
+from wtcli.jsonio import write_failed
 from wtcli.plan.geodesy import MAX_SITE_RADIUS_M, check_site_extent, enu_to_geodetic
 from wtcli.plan_file import Plan, Route
 
@@ -172,30 +177,159 @@ def geojson_dict(plan: Plan) -> dict:
     return {"type": "FeatureCollection", "altitude_reference": ALTITUDE_REFERENCE, "features": feats}
 
 
+@dataclass(frozen=True)
+class ExportSet:
+    """What ``export_all`` did in its folder: this plan's files, and the files of an earlier
+    export of the same stem it replaced (same name) or removed (a sortie or UAV this plan
+    has not)."""
+
+    written: tuple[Path, ...]
+    replaced: tuple[Path, ...] = ()
+    removed: tuple[Path, ...] = ()
+
+
+# STEM_UAV_sN.EXT: the sortie files of one export set (STEM.geojson is the set's map).
+_SORTIE_FILE = re.compile(r"_s[1-9][0-9]*\.(plan|waypoints|kmz)$")
+STAGING_PREFIX = ".wtinspect-exports."
+
+
 def export_all(plan: Plan, out_dir: str | Path, stem: str = "mission", cruise: float = 8.0,
-               hover: float = 2.0, dji: str | None = None) -> list[Path]:
+               hover: float = 2.0, dji: str | None = None) -> ExportSet:
     """Write ``STEM_UAV_sN.plan`` and ``.waypoints`` per UAV sortie and ``STEM.geojson``; with
-    ``dji`` (a key of ``wtcli.plan.dji_kmz.AIRCRAFT``) also a DJI WPML ``STEM_UAV_sN.kmz``."""
+    ``dji`` (a key of ``wtcli.plan.dji_kmz.AIRCRAFT``) also a DJI WPML ``STEM_UAV_sN.kmz``.
+
+    The files are one set: written into a staging folder inside ``out_dir`` first; only when
+    all are written are the earlier export files of ``stem`` removed and the new ones renamed
+    in. A failure before that (a full disk: OutputError naming the file) leaves the earlier set
+    whole; files of other stems and other files are never touched."""
     from wtcli.plan import dji_kmz
 
     _require_origin(plan)
     check_plan_extent(plan)
+    for r in plan.routes:
+        if "/" in r.uav or os.sep in r.uav or r.uav in (".", "..") or "\0" in r.uav:
+            raise ConfigError(f"fleet.uavs: {r.uav!r} cannot be part of a file name "
+                              f"(exports are named {stem}_UAV_sN)")
     ac = dji_kmz.aircraft(dji) if dji is not None else None
-    out_dir = Path(out_dir)
-    kmz = []  # built before anything is written: a refused DJI export leaves no partial set
+    kmz = []  # built before anything is written: a refused DJI export creates nothing
     if ac is not None:
         for r in plan.routes:
             for s, (a, b) in enumerate(sorties(r), start=1):
-                kmz.append((out_dir / f"{stem}_{r.uav}_s{s}.kmz", dji_kmz.kmz_bytes(
+                kmz.append((f"{stem}_{r.uav}_s{s}.kmz", dji_kmz.kmz_bytes(
                     dji_kmz.sortie_waypoints(plan, r, a, b), ac, cruise, hover)))
-    written = [atomic_write_bytes(path, data) for path, data in kmz]
-    for r in plan.routes:
-        for s, (a, b) in enumerate(sorties(r), start=1):
-            items, home = mission_items(plan, r, a, b)
-            base = out_dir / f"{stem}_{r.uav}_s{s}"
-            written.append(atomic_write_text(base.with_suffix(".waypoints"), wpl_text(items, home)))
-            written.append(atomic_write_text(base.with_suffix(".plan"), json.dumps(
-                qgc_plan_dict(items, home, cruise, hover), indent=1, allow_nan=False)))
-    written.append(atomic_write_text(out_dir / f"{stem}.geojson",
-                                     json.dumps(geojson_dict(plan), allow_nan=False)))
-    return written
+
+    def files():
+        yield from kmz
+        for r in plan.routes:
+            for s, (a, b) in enumerate(sorties(r), start=1):
+                items, home = mission_items(plan, r, a, b)
+                base = f"{stem}_{r.uav}_s{s}"
+                yield base + ".waypoints", wpl_text(items, home).encode("utf-8")
+                yield base + ".plan", _text(json.dumps(qgc_plan_dict(items, home, cruise, hover),
+                                                        indent=1, allow_nan=False))
+        yield f"{stem}.geojson", _text(json.dumps(geojson_dict(plan), allow_nan=False))
+
+    return _write_set(Path(out_dir), stem, files())
+
+
+def _text(s: str) -> bytes:
+    return (s if s.endswith("\n") else s + "\n").encode("utf-8")
+
+
+def _write_set(out_dir: Path, stem: str, files) -> ExportSet:
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=STAGING_PREFIX, dir=out_dir))
+    except OSError as e:
+        raise write_failed(out_dir, e) from None
+    try:
+        names = []
+        for name, data in files:
+            _stage(staging / name, out_dir / name, data)
+            names.append(name)
+        for name in names:  # checked before the earlier set is touched
+            _check_in_the_way(out_dir / name)
+        earlier = earlier_exports(out_dir, stem)
+        # The earlier set goes before the new one comes in: an interruption in between leaves
+        # part of one plan (the map last), never the sorties of two plans side by side.
+        for p in earlier:
+            try:
+                p.unlink(missing_ok=True)
+            except OSError as e:
+                raise write_failed(p, e) from None
+        for name in names:
+            try:
+                os.replace(staging / name, out_dir / name)
+            except OSError as e:
+                raise write_failed(out_dir / name, e) from None
+    finally:  # also on KeyboardInterrupt: no staging folder is left behind
+        shutil.rmtree(staging, ignore_errors=True)
+    new = set(names)
+    return ExportSet(tuple(out_dir / n for n in names),
+                     tuple(p for p in earlier if p.name in new),
+                     tuple(p for p in earlier if p.name not in new))
+
+
+def _stage(tmp: Path, final: Path, data: bytes) -> None:
+    """Write one export file into the staging folder. Not ``jsonio.atomic_write_bytes``: the
+    staging folder is already the temporary, and a failure must name the file the user asked
+    for (``final``), not the staging path."""
+    try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)  # the umask applies
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+    except OSError as e:
+        raise write_failed(final, e) from None
+
+
+def _check_in_the_way(path: Path) -> None:
+    if path.is_symlink() or not path.exists() or path.is_file():
+        return
+    if path.is_dir():
+        raise write_failed(path, IsADirectoryError(errno.EISDIR, "a folder is in the way"))
+    raise OutputError(f"{path}: is not a regular file (a device, pipe or socket); write to a file")
+
+
+def earlier_exports(out_dir: str | Path, stem: str) -> list[Path]:
+    """The files of an earlier export of ``stem`` in ``out_dir``: ``STEM.geojson`` and
+    ``STEM_UAV_sN.plan|waypoints|kmz``, sorted. A UAV id may hold "_", so a file another
+    stem's set may own (``STEM_X_UAV1_s1.plan`` beside a ``STEM_X.geojson`` whose routes include
+    UAV1) is left to that set."""
+    out_dir = Path(out_dir)
+    found, maps = [], {}
+    try:
+        entries = sorted(os.scandir(out_dir), key=lambda e: e.name)
+    except FileNotFoundError:
+        return []
+    except OSError as e:
+        raise write_failed(out_dir, e) from None
+    for e in entries:
+        if e.is_dir(follow_symlinks=False):
+            continue
+        if e.name == f"{stem}.geojson":
+            found.append(Path(e.path))
+            continue
+        m = _SORTIE_FILE.search(e.name)
+        if m is None or not e.name.startswith(stem + "_") or m.start() <= len(stem) + 1:
+            continue
+        head = e.name[:m.start()]  # STEM_UAV
+        cuts = [k for k in range(1, len(head)) if head[k] == "_" and k != len(stem)]
+        if not any(_owned_by(out_dir / f"{head[:k]}.geojson", head[k + 1:], maps) for k in cuts):
+            found.append(Path(e.path))
+    return found
+
+
+def _owned_by(geojson: Path, uav: str, maps: dict) -> bool:
+    """Whether the export whose map is ``geojson`` has a route of ``uav``; a map that cannot be
+    read owns every id (its files are left alone rather than guessed at)."""
+    if geojson not in maps:
+        uavs: set[str] | None = set()
+        if geojson.is_file():
+            try:
+                doc = json.loads(geojson.read_text(encoding="utf-8"))
+                uavs = {str(f["properties"]["uav"]) for f in doc["features"]
+                        if f["properties"].get("kind") == "route"}
+            except (OSError, ValueError, KeyError, TypeError, AttributeError):
+                uavs = None
+        maps[geojson] = uavs
+    return maps[geojson] is None or uav in maps[geojson]
