@@ -112,3 +112,54 @@ def test_ctrl_c_inside_compiled_code_is_an_interrupt_not_a_bug(runner):
         raise SystemError("a real one")
     r = runner.invoke(_app_with(bug), ["go"])
     assert r.exit_code == 1 and "unexpected error: SystemError" in r.stderr
+
+
+def _run_with(args: list[str], **streams):
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "wtcli", *map(str, args)], text=True,
+                          timeout=120, **streams)
+
+
+def test_stdout_that_cannot_be_written_is_exit_3_naming_stdout():
+    """`--json > /dev/full` or a full disk: exit 3 and one line naming stdout, not exit 1
+    ("unexpected error: OSError") nor 120 (the interpreter's own flush failing at exit)."""
+    import os
+    import subprocess
+    from pathlib import Path
+
+    import pytest
+
+    if not os.path.exists("/dev/full"):
+        pytest.skip("no /dev/full here")
+    instances = Path(__file__).resolve().parents[1] / "sample_images" / "instances.json"
+    # 97 kB of JSON, a short line, the version (printed before any command runs)
+    for args in (["contours", instances, "--json"], ["contours", instances], ["--version"]):
+        with open("/dev/full", "w") as full:
+            done = _run_with(args, stdout=full, stderr=subprocess.PIPE)
+        assert done.returncode == 3, (args, done.returncode, done.stderr[-800:])
+        assert done.stderr == "error: stdout: cannot write (No space left on device)\n", args
+
+
+def test_a_log_that_cannot_be_written_keeps_the_exit_code_the_run_earned(tmp_path):
+    """stderr on a full disk (a batch job's log): the lines are dropped; a run that succeeds
+    still exits 0, a missing input still 3."""
+    import os
+    import subprocess
+    from pathlib import Path
+
+    import pytest
+
+    if not os.path.exists("/dev/full"):
+        pytest.skip("no /dev/full here")
+    instances = Path(__file__).resolve().parents[1] / "sample_images" / "instances.json"
+    with open("/dev/full", "w") as full:
+        ok = _run_with(["contours", instances, "--out", tmp_path / "c.json"], stderr=full,
+                       stdout=subprocess.PIPE)
+        missing = _run_with(["contours", tmp_path / "missing.json"], stderr=full,
+                            stdout=subprocess.PIPE)
+        debug = _run_with(["--debug", "contours", tmp_path / "missing.json"], stderr=full,
+                          stdout=subprocess.PIPE)
+    assert ok.returncode == 0 and (tmp_path / "c.json").is_file()
+    assert missing.returncode == 3 and debug.returncode == 3

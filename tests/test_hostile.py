@@ -169,7 +169,7 @@ def test_disk_full_stops_the_batch_naming_the_file_and_leaves_no_temporaries(cli
     # Every later photo would fail the same way after the network ran: the batch stops, exit 3.
     assert r.exit_code == 3, r.stderr[-500:]
     assert "overlay/a.png: cannot write (No space left on device)" in r.stderr.splitlines()[-1]
-    assert "stopped with 1 photo(s) not done" in r.stderr
+    assert "stopped with 2 photo(s) not done" in r.stderr  # a.png, where it stopped, and b.jpg
     report = json.loads((out / "report.json").read_text())
     errors = {im["file"]: im["error"] for im in report["images"]}
     assert list(errors) == ["a.png"], errors
@@ -210,6 +210,64 @@ def test_rerun_where_every_photo_fails_leaves_no_stale_instances(cli, photos, we
     report = json.loads((out / "report.json").read_text())
     assert report["instances"] is None and report["n_failed"] == 2
     assert not (out / "instances.json").exists()  # contours cannot read the old run's data
+
+
+def test_a_summary_that_cannot_be_written_is_said_beside_what_stopped_the_batch(
+        cli, photos, weights, tmp_path, monkeypatch):
+    """The disk fills at the last photo's overlay and stays full for the summary: the line says
+    what stopped the batch, that the photo it stopped at is not done, that the summary was not
+    written, and that --resume goes on."""
+    out = tmp_path / "out"
+    real_replace = os.replace
+    full = {"overlay/b.png", "instances.json", "report.json"}
+
+    def filling(src, dst, *a, **k):
+        if any(str(dst).endswith(f"out/{name}") for name in full):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real_replace(src, dst, *a, **k)
+
+    monkeypatch.setattr("wtcli.jsonio.os.replace", filling)
+    r = cli("segment", photos, "--out", out, "--model", weights, *FAST)
+    line = one_error_line(r, 3, "overlay/b.png: cannot write (No space left on device)",
+                          "stopped with 1 photo(s) not done", "instances.json", "--resume")
+    assert "summary could not be written" in line
+    assert not (out / "report.json").exists() and temp_leftovers(out) == []
+    # Every photo done, only the summary failing: said so, with how to write it.
+    full = {"report.json"}
+    r = cli("segment", photos, "--out", out, "--model", weights, *FAST)
+    one_error_line(r, 3, "report.json: cannot write (No space left on device)",
+                   "2 photo(s) segmented are kept", "--resume")
+
+
+def test_segment_clears_only_its_own_temporaries(cli, photos, weights, tmp_path):
+    """A kill leaves .NAME.XXXXXXXX temporaries; a rerun removes those in segment's own
+    subfolders and of its own two files, and nothing else under --out: another program's
+    in-flight write or a user's hidden file of that shape is not segment's to delete."""
+    out = tmp_path / "out"
+    ours = [out / "overlay" / ".a.png.k2j4_x9q", out / "instances" / ".b.json.abcd1234",
+            out / ".report.json.zz11yy22", out / ".instances.json.q1w2e3r4"]
+    theirs = [out / "notes" / ".survey.json.ab12cd34", out / "other_run" / ".photo.png.zz99yy88",
+              out / ".summary.json.ab12cd34"]
+    for p in ours + theirs:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_bytes(b"half")
+    r = cli("segment", photos, "--out", out, "--model", weights, *FAST)
+    assert r.exit_code == 0, r.stderr[-500:]
+    assert sorted(temp_leftovers(out)) == sorted(theirs)
+
+
+def test_a_legal_name_near_the_limit_is_written_through_a_temporary_that_fits(tmp_path):
+    from wtcli.jsonio import atomic_write_bytes, temp_prefix
+    from wtcli.outputs import _TEMP_NAME, remove_temp_files
+
+    for name in ("p" * 250 + ".json", "é" * 125 + ".png", "x" * 255):
+        path = atomic_write_bytes(tmp_path / name, b"data")
+        assert path.read_bytes() == b"data" and temp_leftovers(tmp_path) == []
+        assert len(os.fsencode(temp_prefix(name) + "abcd1234")) <= 255
+    # a cut temporary keeps its extension, so a rerun still knows it for one of ours
+    left = tmp_path / (temp_prefix("p" * 250 + ".json") + "abcd1234")
+    left.write_bytes(b"half")
+    assert _TEMP_NAME.match(left.name) and remove_temp_files(tmp_path) == [left]
 
 
 # ---- unreadable and odd inputs -----------------------------------------------------------------

@@ -1093,7 +1093,8 @@ def test_an_output_that_cannot_be_written_stops_the_batch_keeping_what_is_done(
     out = tmp_path / "seg"
     res = cli("segment", photo_folder, "--out", out, "--model", random_weights, "--no-refine")
     assert res.exit_code == ExitCode.INPUT, res.stderr
-    assert "no space left" in res.stderr and "stopped with 1 photo(s) not done" in res.stderr
+    # b.jpg, where it stopped, and c.png after it
+    assert "no space left" in res.stderr and "stopped with 2 photo(s) not done" in res.stderr
     report = json.loads((out / "report.json").read_text())
     assert [(r["file"], r["status"]) for r in report["images"]] == [("a.png", "ok"), ("b.jpg", "error")]
     assert (out / "instances" / "a.json").is_file() and not (out / "instances" / "c.json").exists()
@@ -1159,3 +1160,70 @@ def test_an_interrupted_batch_sums_up_the_photos_done(cli, photo_folder, random_
     res = cli("segment", photo_folder, "--out", out, "--model", random_weights, "--no-refine",
               "--resume", "--json")
     assert res.exit_code == 0 and json.loads(res.stdout)["interrupted"] is False
+
+
+def test_sigterm_sums_up_the_photos_done_as_ctrl_c(photo_folder, random_weights, tmp_path):
+    """SIGTERM (a scheduler's time limit, `timeout`, `kill`) while the second photo is under
+    way: report.json and instances.json hold the first, then exit 143 (130 is Ctrl-C's)."""
+    import subprocess
+    import sys
+    import textwrap
+
+    code = textwrap.dedent("""
+        import os, signal, sys, time
+        import numpy as np
+        from wtcli.masks import Instances
+        from wtcli.segment import infer
+
+        calls = []
+
+        def fake(img, net, score_threshold, *args, **kwargs):
+            calls.append(1)
+            if len(calls) == 2:
+                os.kill(os.getpid(), signal.SIGTERM)
+                time.sleep(30)
+            h, w = img.shape[:2]
+            return Instances(np.array(["blade"], dtype=object), np.ones((1, h, w), bool),
+                             np.array([0.9]))
+
+        infer.segment_image = fake
+        from wtcli.cli import main
+        main(["segment", sys.argv[1], "--out", sys.argv[2], "--model", sys.argv[3], "--no-refine"])
+    """)
+    out = tmp_path / "seg"
+    done = subprocess.run([sys.executable, "-c", code, str(photo_folder), str(out), str(random_weights)],
+                          capture_output=True, text=True, cwd=Path(__file__).resolve().parents[1],
+                          timeout=300)
+    assert done.returncode == 143, (done.returncode, done.stderr[-800:])
+    assert "1/2 image(s) done before the interrupt; rerun with --resume" in done.stderr
+    assert done.stderr.endswith("interrupted (SIGTERM)\n")
+    report = json.loads((out / "report.json").read_text())
+    assert report["interrupted"] is True and [r["file"] for r in report["images"]] == ["a.png"]
+    assert [img["file_name"] for img, _ in read_instances(out / "instances.json")] == ["a.png"]
+
+
+def test_a_name_too_long_for_the_disk_fails_that_photo_alone(cli, random_weights, tmp_path,
+                                                             monkeypatch):
+    """A photo named close to the 255-byte limit: 250 characters are written (the atomic
+    writer's temporary name is cut to fit); at 255, `instances/NAME.json` would be 256, which no
+    disk takes: that photo fails (exit 9 at the end), the batch goes on."""
+    _fake_segment(monkeypatch)
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    ok, too_long = "p" * 246 + ".png", "q" * 251 + ".png"
+    for name in (ok, too_long, "z.png"):
+        cv2.imwrite(str(folder / name), _image(seed=len(name)))
+    out = tmp_path / "seg"
+    res = cli("segment", folder, "--out", out, "--model", random_weights, "--no-refine")
+    assert res.exit_code == ExitCode.PARTIAL, res.stderr[-800:]
+    report = json.loads((out / "report.json").read_text())
+    status = {r["file"]: (r["status"], r["error"]) for r in report["images"]}
+    assert status[ok] == ("ok", None) and status["z.png"] == ("ok", None)
+    assert status[too_long][0] == "error" and "File name too long" in status[too_long][1]
+    assert (out / "instances" / ("p" * 246 + ".json")).is_file()
+    assert [p for p in out.rglob(".*")] == []  # no temporary left
+    res = cli("segment", folder, "--out", out, "--model", random_weights, "--no-refine", "--resume")
+    assert res.exit_code == ExitCode.PARTIAL, res.stderr[-800:]  # --resume gets past it too
+    report = json.loads((out / "report.json").read_text())
+    assert {r["file"]: r["status"] for r in report["images"]} == {
+        ok: "skipped", too_long: "error", "z.png": "skipped"}

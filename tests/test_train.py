@@ -830,3 +830,79 @@ def test_cli_view_mix_shares_out_of_range(cli, tmp_path, mix):
     assert res.exit_code == ExitCode.CONFIG, res.stderr
     assert f"--view-mix: expected a share in [0, 1e6] for {name}" in res.stderr
     assert res.stderr.count("\n") == 1 and not (tmp_path / "r").exists()
+
+
+def test_sigterm_saves_the_steps_since_the_last_checkpoint(tmp_path):
+    """SIGTERM (a batch scheduler's time limit, `timeout`, `kill`) right after step 1 of a run
+    that checkpoints every 100: the step is saved, as on Ctrl-C, and the exit is 143."""
+    import subprocess
+    import sys
+    import textwrap
+    from pathlib import Path
+
+    code = textwrap.dedent("""
+        import os, signal, sys
+        import wtcli.segment.train as T
+
+        real = T.train
+
+        def train(cfg, progress=None, note=None):
+            def step(rec):
+                progress(rec)
+                if rec["iteration"] == 1:
+                    os.kill(os.getpid(), signal.SIGTERM)
+            return real(cfg, step, note)
+
+        T.train = train
+        from wtcli.cli import main
+        main(["train", "--out", sys.argv[1], "--iterations", "5", "--width", "96", "--height", "72",
+              "--workers", "0", "--eval-count", "0", "--checkpoint-every", "100", "--warmup", "1"])
+    """)
+    run = tmp_path / "run"
+    done = subprocess.run([sys.executable, "-c", code, str(run)], capture_output=True, text=True,
+                          cwd=Path(__file__).resolve().parents[1], timeout=600)
+    assert done.returncode == 143, (done.returncode, done.stderr[-800:])
+    assert done.stderr.endswith("interrupted (SIGTERM)\n")
+    assert int(torch.load(run / "last.ckpt", weights_only=True)["iteration"]) == 1
+    assert sorted(p.name for p in run.iterdir()) == ["last.ckpt"]  # no temporary left
+
+
+def test_a_run_clears_the_temporaries_a_kill_left(tmp_path):
+    """A kill during a checkpoint write leaves .last.ckpt.XXXXXXXX (tens of MB): the next run,
+    started or resumed, removes those of its own files and nothing else."""
+    run = tmp_path / "run"
+    run.mkdir()
+    ours = [run / ".last.ckpt.k2j4_x9q", run / ".model.pt.abcd1234", run / ".metrics.json.zz11yy22"]
+    theirs = [run / ".notes.txt", run / ".other.ckpt.abcd1234"]
+    for p in ours + theirs:
+        p.write_bytes(b"half")
+    train(_tiny(tmp_path, iterations=1, eval_count=0))
+    assert sorted(p for p in run.iterdir() if p.name.startswith(".")) == sorted(theirs)
+    (run / ".last.ckpt.q1w2e3r4").write_bytes(b"half")
+    train(_tiny(tmp_path, iterations=1, eval_count=0, resume=True))
+    assert not (run / ".last.ckpt.q1w2e3r4").exists()
+
+
+def test_train_refiner_clears_the_temporaries_a_kill_left(tmp_path, monkeypatch):
+    """As train: a kill while a data part or the checkpoint was written leaves
+    .part-0000.npz.XXXXXXXX or .last.ckpt.XXXXXXXX; the next run removes them first."""
+    from wtcli.segment import train_refine
+
+    out = tmp_path / "ref"
+    (out / "data").mkdir(parents=True)
+    ours = [out / "data" / ".part-0000.npz.k2j4_x9q", out / "data" / ".photos.json.abcd1234",
+            out / ".last.ckpt.zz11yy22", out / ".refiner.pt.q1w2e3r4"]
+    theirs = [out / "data" / ".notes.npz", out / ".other.npz.abcd1234"]
+    for p in ours + theirs:
+        p.write_bytes(b"half")
+
+    class Stop(Exception):
+        pass
+
+    def stop(*args, **kwargs):  # the data stage: the check is what came before it
+        raise Stop
+    monkeypatch.setattr(train_refine, "make_data", stop)
+    with pytest.raises(Stop):
+        train_refine.train_refiner(train_refine.RefinerConfig(out=str(out), images=4, epochs=1,
+                                                              eval_count=0))
+    assert sorted(p for p in out.rglob(".*")) == sorted(theirs)

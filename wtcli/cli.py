@@ -6,21 +6,55 @@ never needs editing to add one. Commands parse options, call one library functio
 
 from __future__ import annotations
 
+import os
+import signal
+import sys
+from typing import Any, Optional
+
+
+def _quit_at_once(signum: int, frame: Any) -> None:
+    """Ctrl-C or SIGTERM outside the error boundary (while the modules below load, 0.3 s, or
+    typer parses the command line): nothing to clean up yet; the one line, not a traceback."""
+    try:
+        os.write(2, b"interrupted\n")
+    except OSError:
+        pass
+    os._exit(128 + signum)
+
+
+def _handle_signals(handler: Any) -> dict[int, Any]:
+    """Point SIGINT and SIGTERM at ``handler``; returns the handlers replaced (none where this
+    is not the main thread, which alone may set them)."""
+    saved = {}
+    try:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            saved[sig] = signal.signal(sig, handler)
+    except ValueError:
+        pass
+    return saved
+
+
+def _restore_signals(saved: dict[int, Any]) -> None:
+    for sig, handler in saved.items():
+        if handler is not None:  # None: set outside Python, cannot be put back from here
+            signal.signal(sig, handler)
+
+
+_at_import = _handle_signals(_quit_at_once)
+
+# The imports below take most of the start-up: a Ctrl-C there ends quietly (_quit_at_once).
 import gc
 import importlib
-import os
 import pkgutil
 import re
-import sys
 import traceback
-from typing import Any, Optional
 
 import typer
 from rich.markup import escape
 from typer.core import TyperGroup
 
 from wtcli import __version__
-from wtcli.console import err_console
+from wtcli.console import DataStream, LogStream, err_console, to_devnull
 from wtcli.errors import ExitCode, WtError
 
 # torch's OpenMP threads (one per core) spin at every barrier by default: with one of two cores
@@ -63,6 +97,51 @@ def _interrupted(e: BaseException) -> bool:
     return False
 
 
+# SIGTERM (a batch scheduler's time limit, `timeout`, `kill PID`) is handled as Ctrl-C: the
+# same cleanup (a batch's report, a checkpoint of the steps done), then exit 143, not 130.
+_main_pid: int | None = None  # the process main() runs in, while it runs; None: as a library
+_terminated = False  # a SIGTERM came
+
+
+def _on_sigterm(signum: int, frame: Any) -> None:
+    if os.getpid() != _main_pid:
+        # A forked child (a `plan --jobs` worker, a DataLoader worker) is ended by its pool
+        # or parent with SIGTERM: it must die of it, not unwind as an interrupted command.
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        os.kill(os.getpid(), signal.SIGTERM)
+        return
+    global _terminated
+    _terminated = True
+    # A scheduler signals the whole process group: our workers die of the same SIGTERM, and
+    # torch's DataLoader SIGCHLD handler would raise for each, in the middle of the cleanup
+    # (a checkpoint save). Their deaths are expected now. (A handler doing nothing, not
+    # SIG_DFL: Python reports a SIGCHLD already pending for a handler taken away.)
+    if callable(signal.getsignal(signal.SIGCHLD)):
+        signal.signal(signal.SIGCHLD, _expected)
+    raise KeyboardInterrupt
+
+
+def _expected(signum: int, frame: Any) -> None:
+    pass
+
+
+def _sigterm_default_in_child() -> None:
+    # At fork already, so a child busy in compiled code dies at once rather than when it
+    # next runs Python (where _on_sigterm would end it).
+    try:
+        if signal.getsignal(signal.SIGTERM) is _on_sigterm:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    except ValueError:  # forked off the main thread: _on_sigterm's own check covers it
+        pass
+
+
+def _say_interrupted(ctx: typer.Context) -> None:
+    # The console has markup off (console.py): a coloured line asks for it.
+    err_console.print("[red]interrupted[/red]" + (" (SIGTERM)" if _terminated else ""),
+                      markup=True, soft_wrap=True)
+    ctx.exit(ExitCode.TERMINATED if _terminated else ExitCode.INTERRUPTED)
+
+
 class _Boundary(TyperGroup):
     """Maps our exceptions to one red line on stderr and a documented exit code."""
 
@@ -74,8 +153,14 @@ class _Boundary(TyperGroup):
         return sorted(names, key=lambda n: (order.index(n) if n in order else len(order), n))
 
     def invoke(self, ctx: typer.Context) -> Any:
+        saved = {}
+        if _main_pid == os.getpid():  # run by main(): from here on, the boundary cleans up
+            saved = _handle_signals(signal.default_int_handler)
+            signal.signal(signal.SIGTERM, _on_sigterm)
         try:
-            return super().invoke(ctx)
+            done = super().invoke(ctx)
+            sys.stdout.flush()  # a full disk under stdout fails here, named, not at exit
+            return done
         except typer.BadParameter as e:
             m = _NOT_READABLE.search(e.message)
             if m is None:
@@ -86,9 +171,7 @@ class _Boundary(TyperGroup):
         except (typer.Exit, typer.Abort, typer.TyperException):
             raise
         except KeyboardInterrupt:
-            # The console has markup off (console.py): a coloured line asks for it.
-            err_console.print("[red]interrupted[/red]", markup=True, soft_wrap=True)
-            ctx.exit(ExitCode.INTERRUPTED)
+            _say_interrupted(ctx)
         except WtError as e:
             if _debug(ctx):
                 err_console.print(traceback.format_exc(), markup=False)
@@ -112,9 +195,11 @@ class _Boundary(TyperGroup):
             ctx.exit(ExitCode.INPUT)
         except Exception as e:  # noqa: BLE001 - the one place that catches everything
             if _interrupted(e):  # Ctrl-C inside a numba kernel comes out wrapped in a SystemError
-                err_console.print("[red]interrupted[/red]", markup=True, soft_wrap=True)
-                ctx.exit(ExitCode.INTERRUPTED)
+                _say_interrupted(ctx)
             self._unexpected(ctx, e)
+        finally:
+            if saved:  # the work is over: a signal now just ends the process
+                _handle_signals(_quit_at_once)
 
     @staticmethod
     def _unexpected(ctx: typer.Context, e: BaseException) -> None:
@@ -175,6 +260,7 @@ def _register_commands() -> None:
 
 
 _register_commands()
+_restore_signals(_at_import)  # imported as a library (tests), the signals stay the caller's
 
 
 def _stdout_gone(before: os.stat_result | None) -> bool:
@@ -191,25 +277,75 @@ def _stdout_gone(before: os.stat_result | None) -> bool:
         return False
 
 
-def main(argv: list[str] | None = None) -> None:
-    try:
-        before = os.fstat(sys.__stdout__.fileno())
-    except (OSError, ValueError, AttributeError):
-        before = None
-    try:
-        app(args=argv if argv is not None else sys.argv[1:], prog_name="wtinspect")
-    except SystemExit as e:
-        # Output cut short by its reader, as `head` does, is not a failure: exit 0 quietly,
-        # as standard tools do (help and --version are printed before any command runs, so
-        # _Boundary's own BrokenPipeError case does not see them).
-        if e.code == 1 and _stdout_gone(before):
+def _settle_streams(data: DataStream | None, code: Any) -> Any:
+    """Flush stdout and the log before the exit code is final. A stdout that failed where no
+    error said so makes a run that would exit 0 exit 3, with the line naming stdout. Whatever
+    the log (or stdout) still holds and cannot take is dropped: the interpreter's own flush at
+    exit would fail on it again and turn the exit code into 120."""
+    if data is not None:
+        try:
+            data.flush()
+        except WtError:
+            pass  # data.error says it
+        except BrokenPipeError:
+            pass  # the reader went away: dropped below
+        if data.error is not None and code in (0, None):
+            err_console.print(f"[red]error:[/red] {one_line(data.error)}", markup=True,
+                              soft_wrap=True)
+            code = int(ExitCode.INPUT)
+    for stream in (sys.__stdout__, sys.__stderr__):
+        try:
+            stream.flush()
+        except (OSError, ValueError, AttributeError):
+            to_devnull(stream)
             try:
-                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.__stdout__.fileno())
+                stream.flush()
             except (OSError, ValueError, AttributeError):
                 pass
-            raise SystemExit(int(ExitCode.OK)) from None
-        raise
+    return code
+
+
+_fork_hook = False  # os.register_at_fork adds a hook at every call: once is enough
+
+
+def main(argv: list[str] | None = None) -> None:
+    global _main_pid, _fork_hook, _terminated
+    _main_pid, _terminated = os.getpid(), False
+    # Until the boundary takes over (typer parsing the command line), a signal ends at once.
+    outside = _handle_signals(_quit_at_once)
+    if not _fork_hook:
+        os.register_at_fork(after_in_child=_sigterm_default_in_child)
+        _fork_hook = True
+    streams = sys.stdout, sys.stderr
+    data = DataStream(sys.stdout) if sys.stdout is not None else None
+    if data is not None:
+        sys.stdout = data
+    if sys.stderr is not None:
+        sys.stderr = LogStream(sys.stderr)
+    try:
+        try:
+            before = os.fstat(sys.__stdout__.fileno())
+        except (OSError, ValueError, AttributeError):
+            before = None
+        code: Any = 0
+        try:
+            app(args=argv if argv is not None else sys.argv[1:], prog_name="wtinspect")
+        except SystemExit as e:
+            code = e.code
+            # Output cut short by its reader, as `head` does, is not a failure: exit 0
+            # quietly, as standard tools do (help and --version are printed before any
+            # command runs, so _Boundary's own BrokenPipeError case does not see them).
+            if code == 1 and _stdout_gone(before):
+                to_devnull(sys.__stdout__)
+                code = int(ExitCode.OK)
+        except WtError as e:  # stdout failing under --help or --version, before the boundary
+            err_console.print(f"[red]error:[/red] {one_line(str(e))}", markup=True, soft_wrap=True)
+            code = int(e.exit_code)
+        raise SystemExit(_settle_streams(data, code)) from None
     finally:
+        sys.stdout, sys.stderr = streams
+        _restore_signals(outside)
+        _main_pid = None  # a later in-process use (CliRunner) leaves the signals alone
         # The process ends here: without this, the interpreter's last collections walk every
         # object numba and the planner made (0.2-0.3 s of a 2 s photo -> plan, for nothing).
         gc.freeze()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -15,6 +16,88 @@ from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
 # "[.nan, 0, 0]" in a value must come out as written. A line that wants colour says
 # markup=True and escapes what it quotes (rich.markup.escape).
 err_console = Console(stderr=True, highlight=False, markup=False)
+
+
+def to_devnull(stream) -> None:
+    """Point ``stream``'s file descriptor at /dev/null (what it still buffers goes there)."""
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        try:
+            os.dup2(null, stream.fileno())
+        finally:
+            os.close(null)
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+class LogStream:
+    """``sys.stderr`` while a command runs: a write or flush the log cannot take (a full disk,
+    a closed pipe) is dropped, so the log never changes the exit code the run earned."""
+
+    def __init__(self, stream) -> None:
+        self.stream = stream
+
+    def write(self, text: str) -> int:
+        try:
+            return self.stream.write(text)
+        except OSError:
+            return len(text)
+
+    def writelines(self, lines) -> None:
+        for line in lines:
+            self.write(line)
+
+    def flush(self) -> None:
+        try:
+            self.stream.flush()
+        except OSError:
+            pass
+
+    def __getattr__(self, name: str):
+        return getattr(self.stream, name)
+
+
+class DataStream:
+    """``sys.stdout`` while a command runs: a write or flush that fails (``--json >`` a full
+    disk) raises OutputError naming stdout (exit 3) instead of an unnamed OSError. A reader
+    gone away (BrokenPipeError) passes through: the CLI ends quietly on that."""
+
+    def __init__(self, stream) -> None:
+        self.stream = stream
+        self.error: str | None = None  # the message, once a write failed
+
+    def _failed(self, e: OSError):
+        from wtcli.jsonio import write_failed
+
+        err = write_failed("stdout", e)
+        self.error = str(err)
+        # What stays buffered can never be written: from now on stdout is /dev/null, so the
+        # interpreter's flush at exit does not fail again (exit 120, "Exception ignored").
+        to_devnull(self.stream)
+        return err
+
+    def write(self, text: str) -> int:
+        try:
+            return self.stream.write(text)
+        except BrokenPipeError:
+            raise
+        except OSError as e:
+            raise self._failed(e) from None
+
+    def writelines(self, lines) -> None:
+        for line in lines:
+            self.write(line)
+
+    def flush(self) -> None:
+        try:
+            self.stream.flush()
+        except BrokenPipeError:
+            raise
+        except OSError as e:
+            raise self._failed(e) from None
+
+    def __getattr__(self, name: str):
+        return getattr(self.stream, name)
 
 
 def make_progress(transient: bool = False) -> Progress:

@@ -20,7 +20,8 @@ class ExitCode(IntEnum):
     MODEL = 7  # model weights missing or corrupt
     SIMULATION = 8  # the flight simulation diverged or violated safety when asked to fail on it
     PARTIAL = 9  # a batch finished but some items failed (see its report)
-    INTERRUPTED = 130
+    INTERRUPTED = 130  # Ctrl-C (128 + SIGINT)
+    TERMINATED = 143  # SIGTERM (128 + 15): a batch scheduler's time limit, `timeout`, `kill PID`
 
 
 class WtError(Exception):
@@ -42,9 +43,15 @@ class InputError(WtError):
 
 class OutputError(WtError):
     """An output path cannot be written: a file in the way, a read-only folder, a full disk.
-    Same exit code as an unreadable input (docs/exit-codes.md); the message names the path."""
+    Same exit code as an unreadable input (docs/exit-codes.md); the message names the path.
+    ``errno``: the OSError's, where one caused it (a batch tells a name too long for one item
+    from a full disk that stops every item)."""
 
     exit_code = ExitCode.INPUT
+
+    def __init__(self, message: str, errno: int | None = None) -> None:
+        super().__init__(message)
+        self.errno = errno
 
 
 class ConfigError(WtError):

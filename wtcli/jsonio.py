@@ -10,6 +10,7 @@ import errno
 import json
 import math
 import os
+import re
 import reprlib
 import tempfile
 from pathlib import Path
@@ -56,7 +57,7 @@ def missing(path: str | Path) -> str:
 
 def write_failed(path: str | Path, e: OSError) -> OutputError:
     """The one message for an output that could not be written (exit 3, docs/exit-codes.md)."""
-    return OutputError(f"{path}: cannot write ({os_reason(e)})")
+    return OutputError(f"{path}: cannot write ({os_reason(e)})", errno=e.errno)
 
 
 def _umask() -> int:
@@ -101,29 +102,78 @@ def dumps(doc: Any, digits: int = FLOAT_DIGITS, indent: int | None = 1) -> str:
     return json.dumps(clean(doc, digits), sort_keys=True, allow_nan=False, indent=indent)
 
 
+NAME_MAX = 255  # bytes in one file name on the usual file systems (ext4, XFS, APFS)
+_TEMP_TAIL = 10  # what a temporary adds to the name: a dot before, a dot and 8 characters after
+_RANDOM = r"[a-z0-9_]{8}"  # tempfile's random part
+
+
+def temp_prefix(name: str) -> str:
+    """The start of the temporary's name that ``atomic_write_bytes`` writes ``name`` through:
+    ``.NAME.``, then 8 random characters. A name within 10 bytes of the 255-byte limit is cut
+    to fit, its final extension kept (``outputs.remove_temp_files`` knows temporaries by it)."""
+    raw = os.fsencode(name)
+    room = NAME_MAX - _TEMP_TAIL
+    if len(raw) <= room:
+        return f".{name}."
+    stem, dot, ext = name.rpartition(".")
+    keep = os.fsencode(dot + ext) if stem and len(ext) <= 16 else b""
+    cut = (os.fsencode(stem) if keep else raw)[:room - len(keep)]
+    # Cut on a character, not inside one; any bytes that were not UTF-8 are dropped.
+    return "." + (cut + keep).decode("utf-8", "ignore") + "."
+
+
+def remove_temps(folder: str | Path, names: str) -> list[Path]:
+    """Delete the temporaries a kill between write and rename left in ``folder`` (not below
+    it) for the files whose names match the regular expression ``names`` (names short enough
+    to be kept whole in a temporary's name); returns what was removed. A command calls this
+    for its own files when it starts, as ``outputs.remove_temp_files`` does for a folder of
+    its own."""
+    folder = Path(folder)
+    pattern = re.compile(rf"\.(?:{names})\.{_RANDOM}")
+    removed: list[Path] = []
+    try:
+        entries = [e.name for e in os.scandir(folder) if e.is_file(follow_symlinks=False)]
+    except (FileNotFoundError, NotADirectoryError):
+        return removed
+    except OSError as e:
+        raise write_failed(folder, e) from None
+    for name in entries:
+        if pattern.fullmatch(name):
+            p = folder / name
+            try:
+                p.unlink()
+            except FileNotFoundError:
+                continue
+            except OSError as e:
+                raise write_failed(p, e) from None
+            removed.append(p)
+    return removed
+
+
 def atomic_write_text(path: str | Path, text: str) -> Path:
     return atomic_write_bytes(path, (text if text.endswith("\n") else text + "\n").encode("utf-8"))
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
-    """Write ``data`` to a temporary ``.NAME.XXXXXXXX`` beside ``path``, then rename it over
-    ``path``: readers see the old file or the new one, never half of one. Any OSError (a file
-    in the way, a read-only folder, a full disk) becomes OutputError naming ``path``; the
-    temporary file is removed (``outputs.remove_temp_files`` clears those a kill left).
-    A symbolic link is written through (its target replaced, the link kept); a device, pipe
-    or socket in the way is refused rather than replaced by a file."""
+    """Write ``data`` to a temporary ``.NAME.XXXXXXXX`` beside ``path`` (``temp_prefix``: a
+    long NAME is cut to fit), then rename it over ``path``: readers see the old file or the new
+    one, never half of one. Any OSError (a file in the way, a read-only folder, a full disk)
+    becomes OutputError naming ``path``; the temporary file is removed
+    (``outputs.remove_temp_files`` clears those a kill left). A symbolic link is written
+    through (its target replaced, the link kept); a device, pipe or socket in the way is
+    refused rather than replaced by a file."""
     path = Path(path)
     shown = path
-    if path.is_symlink():
-        path = Path(os.path.realpath(path))
     try:
+        if path.is_symlink():  # raises for a name over the limit: that is this file's error too
+            path = Path(os.path.realpath(path))
         if path.exists() and not (path.is_file() or path.is_dir()):
             raise OutputError(f"{shown}: is not a regular file (a device, pipe or socket); "
                               "write to a file")
         if path.is_dir():
             raise IsADirectoryError(errno.EISDIR, "a folder is in the way")
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+        fd, tmp = tempfile.mkstemp(prefix=temp_prefix(path.name), dir=path.parent)
     except OSError as e:
         raise write_failed(shown, e) from None
     try:

@@ -60,7 +60,8 @@ def segment(
     from wtcli.console import count_bar, err_console
     from wtcli.errors import InputError, OutputError, PartialFailure
     from wtcli.jsonio import dumps
-    from wtcli.segment.batch import FOUND, find_images, segment_paths, write_batch_files
+    from wtcli.segment.batch import (FOUND, batch_report, find_images, segment_paths,
+                                     write_batch_files)
     from wtcli.segment.infer import load_model, segment_image
     from wtcli.segment.model import resolve_weights
     from wtcli.segment.refine import load_refiner, resolve_refiner
@@ -90,10 +91,16 @@ def segment(
                               on_progress=lambda res: advance(f"{res.rel} {res.status}"),
                               score_threshold=score_threshold, settings=settings)
     results = batch.results
-    report = write_batch_files(out, results, settings, interrupted=batch.interrupted)
-    if batch.interrupted:  # Ctrl-C: the photos done are summed up, then exit 130
-        err_console.print(f"{len(results)}/{len(files)} image(s) done before the interrupt; "
-                          f"rerun with --resume to go on", soft_wrap=True)
+    report = batch_report(out, results, settings, interrupted=batch.interrupted)
+    unsaved: OutputError | None = None  # the summary could not be written (the disk filled)
+    try:
+        write_batch_files(out, results, report)
+    except OutputError as e:  # said beside what stopped the batch, not instead of it
+        unsaved = e
+    if batch.interrupted:  # Ctrl-C or SIGTERM: the photos done are summed up, then exit 130/143
+        err_console.print(f"{len(results)}/{len(files)} image(s) done before the interrupt"
+                          + (f" (the summary could not be written: {unsaved})" if unsaved else "")
+                          + "; rerun with --resume to go on", soft_wrap=True)
         raise KeyboardInterrupt
 
     found = report["n_found"]  # photos by what they hold: rotor, single blade, tower only, nothing
@@ -115,12 +122,16 @@ def segment(
     err_console.print(f"{len(results) - bad}/{len(results)} image(s) segmented"
                       + (f" ({report['n_skipped']} already done)" if report["n_skipped"] else ""),
                       soft_wrap=True)
-    if json_out:
+    if json_out and unsaved is None:
         typer.echo(dumps(report))
     if batch.stopped is not None:
-        left = len(files) - len(results)
-        raise OutputError(f"{batch.stopped}; stopped with {left} photo(s) not done (those done "
-                          f"are kept: fix it and rerun with --resume)")
+        left = len(files) - len(results) + 1  # the photo it stopped at is not done either
+        also = f", and the summary could not be written ({unsaved})" if unsaved else ""
+        raise OutputError(f"{batch.stopped}; stopped with {left} photo(s) not done{also}; those "
+                          "done are kept: fix it and rerun with --resume to go on")
+    if unsaved is not None:
+        raise OutputError(f"{unsaved}; the files of the {len(results) - bad} photo(s) segmented "
+                          "are kept: fix it and rerun with --resume to write the summary")
     if bad:
         if len(results) == 1 and path.is_file():
             raise InputError(results[0].error)

@@ -915,8 +915,20 @@ def _map(fn, jobs: list, workers: int | None, tick: Callable[[], None] = lambda:
         return collect(map(fn, jobs))
     import multiprocessing as mp
 
-    with ProcessPoolExecutor(workers, mp_context=mp.get_context("fork")) as ex:
+    ex = ProcessPoolExecutor(workers, mp_context=mp.get_context("fork"))
+    try:
         return collect(ex.map(fn, jobs, chunksize=max(1, len(jobs) // (4 * workers))))
+    except BaseException:
+        # Ctrl-C, or SIGTERM to this process alone (wtcli.cli turns it into the same
+        # KeyboardInterrupt), or a job's error: end the workers now rather than wait for the
+        # jobs queued; left running, they would hold stdout and stderr open after we exit.
+        # (Python 3.11's executor has no public call for it; 3.14 adds terminate_workers.)
+        for p in list((ex._processes or {}).values()):
+            p.terminate()
+        ex.shutdown(wait=False, cancel_futures=True)
+        raise
+    finally:
+        ex.shutdown(wait=True)
 
 
 # The stages plan_mission reports to its ``progress`` callback, in order.

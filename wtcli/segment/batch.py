@@ -17,16 +17,18 @@ and once the batch ends, ``instances.json`` (every finished image in one COCO fi
 ``contours`` and ``pitch``) and ``report.json`` (per file: ok / error, counts, what was found,
 outputs; and how many photos held a rotor, a single blade, a tower only or nothing).
 Every file is written atomically. A failing image is recorded and the batch goes on; a broken
-or looping symbolic link to an image is such a failure too, not skipped. An output that cannot
-be written (a full disk, a read-only subfolder) stops the batch instead: every later image
-would fail the same way after the network ran. Each run first removes
-temporaries a kill left (``.NAME.XXXXXXXX``); ``--resume`` redoes an image whose instances file
-cannot be read; a run where no image succeeds removes an earlier ``instances.json`` rather than
-leave it beside a report that says ``instances: null``.
+or looping symbolic link to an image is such a failure too, not skipped, and so is an output
+name too long for the disk. An output that cannot be written otherwise (a full disk, a
+read-only subfolder) stops the batch instead: every later image would fail the same way after
+the network ran. Each run first removes temporaries a kill left (``.NAME.XXXXXXXX``) in the
+four subfolders and of the two files above, nothing else under ``OUT``; ``--resume`` redoes an
+image whose instances file cannot be read; a run where no image succeeds removes an earlier
+``instances.json`` rather than leave it beside a report that says ``instances: null``.
 """
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import os
 from dataclasses import dataclass, field
@@ -37,7 +39,7 @@ import cv2
 import numpy as np
 
 from wtcli.errors import ConfigError, InputError, OutputError, WtError
-from wtcli.jsonio import atomic_write_bytes, document, missing, os_reason, write_json
+from wtcli.jsonio import atomic_write_bytes, document, missing, os_reason, remove_temps, write_json
 from wtcli.outputs import remove_stale, remove_temp_files
 from wtcli.masks import (LABELS, Instances, check_declared_size, instances_document, read_instances,
                          write_instances)
@@ -94,7 +96,7 @@ class ImageResult:
 class Batch:
     results: list[ImageResult]
     stopped: OutputError | None = None  # an output could not be written: the batch ended there
-    interrupted: bool = False  # Ctrl-C: the photos done are in results, the one under way is not
+    interrupted: bool = False  # Ctrl-C or SIGTERM: the photos done are in results, not the one under way
 
 
 def find_images(path: Path, recursive: bool = False, out: Path | None = None
@@ -221,7 +223,11 @@ def segment_paths(path: Path, out: Path, segment: Callable[[np.ndarray], Instanc
     go into each photo's instances file, and a ``resume`` over files made with other values of
     ``RESUME_KEYS`` is refused (ConfigError)."""
     root, files = find_images(path, recursive, out)
-    remove_temp_files(out)
+    # Temporaries a kill left, in the folders and of the files segment writes: anything else
+    # under --out (a user's notes, another program's writes) is not ours to delete.
+    for sub in SUBFOLDERS:
+        remove_temp_files(out / sub)
+    remove_temps(out, r"instances\.json|report\.json")
     rels = [str(f.relative_to(root)) if path.is_dir() else f.name for f in files]
     names = output_names(rels)
     batch = Batch([])
@@ -252,9 +258,12 @@ def segment_paths(path: Path, out: Path, segment: Callable[[np.ndarray], Instanc
                                     extra={"settings": settings} if settings is not None else None)
                 res.counts = counts_of(res.instances)
                 res.found = found_in(res.instances, score_threshold)
-            except OutputError as e:  # the next image would fail the same way, after the network
+            except OutputError as e:
                 res.status, res.error, res.instances = "error", str(e), None
-                batch.stopped = e
+                # A name too long for the disk is this photo's alone; anything else (a full
+                # disk, a read-only folder) would fail the next photo too, after the network.
+                if e.errno != errno.ENAMETOOLONG:
+                    batch.stopped = e
             except ConfigError:
                 raise
             except WtError as e:
@@ -333,18 +342,12 @@ def _image_record(iid: int, rel: str, src: Path, res: ImageResult) -> dict[str, 
     return rec
 
 
-def write_batch_files(out: Path, results: list[ImageResult], settings: dict[str, Any],
-                      interrupted: bool = False) -> dict[str, Any]:
-    """The combined instances.json (finished images) and report.json; returns the report.
-    ``interrupted``: the batch was stopped (Ctrl-C) before its last photos, which it leaves out."""
-    done = [r for r in results if r.instances is not None]
-    images = [_image_record(k + 1, r.rel, Path(r.source), r) for k, r in enumerate(done)]
-    if done:
-        write_instances(out / "instances.json", images, [r.instances for r in done],
-                        extra={"settings": settings})
-    else:
-        remove_stale(out / "instances.json")  # it would hold an earlier run's images
-    report = document(REPORT_SCHEMA, 1, {
+def batch_report(out: Path, results: list[ImageResult], settings: dict[str, Any],
+                 interrupted: bool = False) -> dict[str, Any]:
+    """What report.json holds. ``interrupted``: the batch was stopped (Ctrl-C, SIGTERM) before
+    its last photos, which it leaves out."""
+    done = any(r.instances is not None for r in results)
+    return document(REPORT_SCHEMA, 1, {
         "settings": settings,
         "images": [r.to_dict(out) for r in results],
         "n_images": len(results), "n_failed": sum(r.status == "error" for r in results),
@@ -354,10 +357,22 @@ def write_batch_files(out: Path, results: list[ImageResult], settings: dict[str,
         "instances": str(out / "instances.json") if done else None,
         "interrupted": interrupted,  # added within schema_version 1, as n_found
     })
+
+
+def write_batch_files(out: Path, results: list[ImageResult], report: dict[str, Any]) -> None:
+    """The combined instances.json (finished images) and ``report`` (``batch_report``) as
+    report.json."""
+    done = [r for r in results if r.instances is not None]
+    images = [_image_record(k + 1, r.rel, Path(r.source), r) for k, r in enumerate(done)]
+    if done:
+        write_instances(out / "instances.json", images, [r.instances for r in done],
+                        extra={"settings": report["settings"]})
+    else:
+        remove_stale(out / "instances.json")  # it would hold an earlier run's images
     write_json(out / "report.json", report)
-    return report
 
 
-__all__ = ["FOUND", "IMAGE_SUFFIXES", "SUBFOLDERS", "Batch", "ImageResult", "found_in", "find_images",
+__all__ = ["FOUND", "IMAGE_SUFFIXES", "SUBFOLDERS", "Batch", "ImageResult", "batch_report",
+           "found_in", "find_images",
            "is_output_folder", "output_names", "output_paths", "read_image", "segment_paths",
            "write_batch_files", "instances_document"]

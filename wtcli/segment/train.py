@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from wtcli.errors import ConfigError, InputError, ModelError, WtError
-from wtcli.jsonio import atomic_write_bytes, document, write_json
+from wtcli.jsonio import atomic_write_bytes, document, remove_temps, write_json
 from wtcli.segment import data as D
 from wtcli.segment.infer import MASK_OFFSET_PX
 from wtcli.segment.model import (ARCH, PRECISIONS, TRAIN_MIN_SIZES, average_weights,
@@ -37,6 +37,7 @@ from wtcli.segment.model import (ARCH, PRECISIONS, TRAIN_MIN_SIZES, average_weig
 TRAIN_SCHEMA = "wtinspect.train_metrics"
 CKPT_NAME = "last.ckpt"
 AVERAGE_NAME = "model-average.pt"  # --average-with: the run's weights averaged with another file's
+RUN_FILES = r"last\.ckpt|model\.pt|metrics\.json|model-average\.pt"  # what a run writes in OUT
 
 
 @dataclass
@@ -298,6 +299,7 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
             raise InputError(f"{out}: holds a run already ({', '.join(held)}); --resume to "
                              "continue it, or pick another --out")
     out.mkdir(parents=True, exist_ok=True)
+    remove_temps(out, RUN_FILES)  # what a kill mid-write left (.last.ckpt.XXXXXXXX)
     device = pick_device(cfg.device)
     if cfg.threads or device.type == "cpu":
         # One thread unless asked: on a shared or busy CPU, torch's thread pool spends more
