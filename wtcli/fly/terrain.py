@@ -57,6 +57,9 @@ class Ground:
         xy = np.atleast_2d(np.asarray(xy, float))[:, :2]
         if not len(self.pads):
             return np.zeros(len(xy))
+        z = self.pads[:, 2]
+        if np.all(z == z[0]):  # one level: no search (a whole route's steps at a time)
+            return np.full(len(xy), z[0])
         return self.flat.z(xy)
 
     def height(self, xy: np.ndarray) -> np.ndarray:

@@ -373,11 +373,7 @@ class FlatGround:
 
     def z(self, points: np.ndarray) -> np.ndarray:
         """Ground level under each of ``points`` ((N, 2) or (N, 3); x/y used)."""
-        P = np.atleast_2d(np.asarray(points, float))
-        G = self.points
-        if len(G) and np.all(G[:, 2] == G[0, 2]):  # one level: no search
-            return np.full(len(P), G[0, 2])
-        return G[self.index(P), 2]
+        return self.points[self.index(points), 2]
 
     def index(self, points: np.ndarray) -> np.ndarray:
         """Index (into ``points``) of the ground point nearest each point in x/y, the
