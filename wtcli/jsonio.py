@@ -104,7 +104,6 @@ def dumps(doc: Any, digits: int = FLOAT_DIGITS, indent: int | None = 1) -> str:
 
 NAME_MAX = 255  # bytes in one file name on the usual file systems (ext4, XFS, APFS)
 _TEMP_TAIL = 10  # what a temporary adds to the name: a dot before, a dot and 8 characters after
-_RANDOM = r"[a-z0-9_]{8}"  # tempfile's random part
 
 
 def temp_prefix(name: str) -> str:
@@ -120,34 +119,6 @@ def temp_prefix(name: str) -> str:
     cut = (os.fsencode(stem) if keep else raw)[:room - len(keep)]
     # Cut on a character, not inside one; any bytes that were not UTF-8 are dropped.
     return "." + (cut + keep).decode("utf-8", "ignore") + "."
-
-
-def remove_temps(folder: str | Path, names: str) -> list[Path]:
-    """Delete the temporaries a kill between write and rename left in ``folder`` (not below
-    it) for the files whose names match the regular expression ``names`` (names short enough
-    to be kept whole in a temporary's name); returns what was removed. A command calls this
-    for its own files when it starts, as ``outputs.remove_temp_files`` does for a folder of
-    its own."""
-    folder = Path(folder)
-    pattern = re.compile(rf"\.(?:{names})\.{_RANDOM}")
-    removed: list[Path] = []
-    try:
-        entries = [e.name for e in os.scandir(folder) if e.is_file(follow_symlinks=False)]
-    except (FileNotFoundError, NotADirectoryError):
-        return removed
-    except OSError as e:
-        raise write_failed(folder, e) from None
-    for name in entries:
-        if pattern.fullmatch(name):
-            p = folder / name
-            try:
-                p.unlink()
-            except FileNotFoundError:
-                continue
-            except OSError as e:
-                raise write_failed(p, e) from None
-            removed.append(p)
-    return removed
 
 
 def atomic_write_text(path: str | Path, text: str) -> Path:

@@ -28,7 +28,8 @@ from wtcli.jsonio import write_failed
 
 # jsonio.atomic_write_bytes names its temporaries tempfile.mkstemp(prefix=".NAME."): a dot,
 # the final name, a dot, 8 random characters. Only names of files we write (json, png) match.
-_TEMP_NAME = re.compile(r"^\..+\.(json|png|pt|ckpt|csv|kml|kmz|plan|waypoints|txt)\.[a-z0-9_]{8}$")
+_RANDOM = r"[a-z0-9_]{8}"  # tempfile's random part
+_TEMP_NAME = re.compile(rf"^\..+\.(json|png|pt|ckpt|csv|kml|kmz|plan|waypoints|txt)\.{_RANDOM}$")
 
 
 def writable_folder(folder: str | Path, what: str = "--out") -> Path:
@@ -79,16 +80,24 @@ def writable_file(path: str | Path, what: str = "--out") -> Path:
     return path
 
 
-def remove_temp_files(folder: str | Path) -> list[Path]:
-    """Delete the ``.NAME.XXXXXXXX`` temporaries of atomic writes under ``folder`` (left by
-    a kill between write and rename); returns what was removed."""
+def remove_temp_files(folder: str | Path, names: str | None = None) -> list[Path]:
+    """Delete the ``.NAME.XXXXXXXX`` temporaries of atomic writes (left by a kill between write
+    and rename); returns what was removed. Without ``names``: every one under ``folder``, a
+    folder of the command's own. With ``names``, a regular expression: only those of the files
+    it matches, in ``folder`` itself (a command's own files in a folder it shares)."""
     folder = Path(folder)
     removed: list[Path] = []
     if not folder.is_dir():
         return removed
-    for dirpath, _, names in os.walk(folder):
-        for name in names:
-            if _TEMP_NAME.match(name):
+    if names is None:
+        walk = os.walk(folder)
+    else:
+        walk = [(str(folder), None, [e.name for e in os.scandir(folder)
+                                     if e.is_file(follow_symlinks=False)])]
+    pattern = _TEMP_NAME if names is None else re.compile(rf"\.(?:{names})\.{_RANDOM}$")
+    for dirpath, _, entries in walk:
+        for name in entries:
+            if pattern.match(name):
                 p = Path(dirpath) / name
                 try:
                     p.unlink()

@@ -39,7 +39,7 @@ import cv2
 import numpy as np
 
 from wtcli.errors import ConfigError, InputError, OutputError, WtError
-from wtcli.jsonio import atomic_write_bytes, document, missing, os_reason, remove_temps, write_json
+from wtcli.jsonio import atomic_write_bytes, document, missing, os_reason, write_json
 from wtcli.outputs import remove_stale, remove_temp_files
 from wtcli.masks import (LABELS, Instances, check_declared_size, instances_document, read_instances,
                          write_instances)
@@ -227,7 +227,7 @@ def segment_paths(path: Path, out: Path, segment: Callable[[np.ndarray], Instanc
     # under --out (a user's notes, another program's writes) is not ours to delete.
     for sub in SUBFOLDERS:
         remove_temp_files(out / sub)
-    remove_temps(out, r"instances\.json|report\.json")
+    remove_temp_files(out, r"instances\.json|report\.json")
     rels = [str(f.relative_to(root)) if path.is_dir() else f.name for f in files]
     names = output_names(rels)
     batch = Batch([])

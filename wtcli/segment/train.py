@@ -27,7 +27,8 @@ import numpy as np
 import torch
 
 from wtcli.errors import ConfigError, InputError, ModelError, WtError
-from wtcli.jsonio import atomic_write_bytes, document, remove_temps, write_json
+from wtcli.jsonio import atomic_write_bytes, document, write_json
+from wtcli.outputs import remove_temp_files
 from wtcli.segment import data as D
 from wtcli.segment.infer import MASK_OFFSET_PX
 from wtcli.segment.model import (ARCH, PRECISIONS, TRAIN_MIN_SIZES, average_weights,
@@ -299,7 +300,7 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
             raise InputError(f"{out}: holds a run already ({', '.join(held)}); --resume to "
                              "continue it, or pick another --out")
     out.mkdir(parents=True, exist_ok=True)
-    remove_temps(out, RUN_FILES)  # what a kill mid-write left (.last.ckpt.XXXXXXXX)
+    remove_temp_files(out, RUN_FILES)  # what a kill mid-write left (.last.ckpt.XXXXXXXX)
     device = pick_device(cfg.device)
     if cfg.threads or device.type == "cpu":
         # One thread unless asked: on a shared or busy CPU, torch's thread pool spends more

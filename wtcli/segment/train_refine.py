@@ -29,7 +29,8 @@ import numpy as np
 import torch
 
 from wtcli.errors import ConfigError, InputError, ModelError
-from wtcli.jsonio import atomic_write_bytes, document, remove_temps, write_json
+from wtcli.jsonio import atomic_write_bytes, document, write_json
+from wtcli.outputs import remove_temp_files
 from wtcli.segment import refine as R
 from wtcli.segment.data import HELDOUT_SEED_BASE, TRAIN_SEED_BASE
 
@@ -447,8 +448,8 @@ def train_refiner(cfg: RefinerConfig, progress: Callable[[dict[str, Any]], None]
     if not cfg.resume and (out / "data").is_dir() and any((out / "data").glob("part-*.npz")):
         raise InputError(f"{out}: holds a run already; --resume to continue it, or pick another --out")
     # What a kill mid-write left (.part-0000.npz.XXXXXXXX, .last.ckpt.XXXXXXXX).
-    remove_temps(out, r"last\.ckpt|refiner\.pt|metrics\.json")
-    remove_temps(out / "data", r"part-\d{4,}\.npz|photo-\d{4,}\.npz|photos\.json")
+    remove_temp_files(out, r"last\.ckpt|refiner\.pt|metrics\.json")
+    remove_temp_files(out / "data", r"part-\d{4,}\.npz|photo-\d{4,}\.npz|photos\.json")
     if cfg.threads:
         torch.set_num_threads(int(cfg.threads))
     t0 = time.monotonic()
