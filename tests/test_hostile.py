@@ -268,6 +268,9 @@ def test_a_legal_name_near_the_limit_is_written_through_a_temporary_that_fits(tm
     left = tmp_path / (temp_prefix("p" * 250 + ".json") + "abcd1234")
     left.write_bytes(b"half")
     assert _TEMP_NAME.match(left.name) and remove_temp_files(tmp_path) == [left]
+    # every kind of file a command writes is known by its temporary (site's YAML, exports, parts)
+    for name in ("turbines.yaml", "site.geojson", "part-0000.npz", "00000.jpg", "m.kmz"):
+        assert _TEMP_NAME.match(temp_prefix(name) + "abcd1234"), name
 
 
 # ---- unreadable and odd inputs -----------------------------------------------------------------

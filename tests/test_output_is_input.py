@@ -107,3 +107,11 @@ def test_same_file_compares_paths_that_do_not_exist_yet(tmp_path):
     (tmp_path / "y").write_text("")
     os.link(tmp_path / "y", tmp_path / "z")
     assert same_file(tmp_path / "y", tmp_path / "z")
+
+
+def test_two_outputs_that_are_one_file_are_refused(cli, inputs):
+    """`plan --out x.png --picture x.png`: the picture would replace the plan just written."""
+    out = inputs / "x.png"
+    r = cli("plan", inputs / "turbines.yaml", "--out", out, "--picture", out)
+    _refused(r, f"--picture {out}: is also --out's output; choose another output")
+    assert not out.exists()

@@ -27,9 +27,10 @@ from wtcli.errors import OutputError, UsageError
 from wtcli.jsonio import write_failed
 
 # jsonio.atomic_write_bytes names its temporaries tempfile.mkstemp(prefix=".NAME."): a dot,
-# the final name, a dot, 8 random characters. Only names of files we write (json, png) match.
+# the final name, a dot, 8 random characters. Only names of files we write match.
 _RANDOM = r"[a-z0-9_]{8}"  # tempfile's random part
-_TEMP_NAME = re.compile(rf"^\..+\.(json|png|pt|ckpt|csv|kml|kmz|plan|waypoints|txt)\.{_RANDOM}$")
+_TEMP_NAME = re.compile(
+    rf"^\..+\.(json|geojson|png|jpg|pt|ckpt|npz|csv|yaml|kml|kmz|plan|waypoints|txt)\.{_RANDOM}$")
 
 
 def writable_folder(folder: str | Path, what: str = "--out") -> Path:
@@ -164,17 +165,25 @@ def check_not_inputs(outputs: Iterable[tuple[str, str | Path | None]],
     """Refuse (UsageError, exit 2) an output that is one of the command's inputs, before any
     work: an atomic write would silently replace the input with the output. ``outputs`` pairs
     the option with the path it writes (``("--out", out)``); ``inputs`` pairs what an input is
-    with its path (``("the input turbines file", yaml)``). None: not given."""
+    with its path (``("the input turbines file", yaml)``). None: not given. Two outputs that
+    are one file (``--out x --picture x``: the second would replace the first) are refused too."""
     given: dict[tuple, tuple[str, str | Path]] = {}
     for what, p in inputs:
         if p is not None:
             given.setdefault(_identity(p), (what, p))
+    written: dict[tuple, str] = {}
     for option, out in outputs:
-        if out is None or _identity(out) not in given:
+        if out is None:
             continue
-        what, inp = given[_identity(out)]
-        also = "" if os.path.normpath(str(inp)) == os.path.normpath(str(out)) else f" ({inp})"
-        raise UsageError(f"{option} {out}: is {what}{also}; choose another output")
+        key = _identity(out)
+        if key in given:
+            what, inp = given[key]
+            also = "" if os.path.normpath(str(inp)) == os.path.normpath(str(out)) else f" ({inp})"
+            raise UsageError(f"{option} {out}: is {what}{also}; choose another output")
+        if key in written:
+            raise UsageError(f"{option} {out}: is also {written[key]}'s output; choose another "
+                             "output")
+        written[key] = option
 
 
 def _fold(name: str) -> str:
