@@ -126,9 +126,9 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
-    """Write ``data`` to a temporary ``.NAME.XXXXXXXX`` beside ``path`` (``temp_prefix``: a
-    long NAME is cut to fit), then rename it over ``path``: readers see the old file or the new
-    one, never half of one. Any OSError (a file in the way, a read-only folder, a full disk)
+    """Write ``data`` to a temporary ``.NAME.k2x9q0ab`` (8 random characters) beside ``path``
+    (``temp_prefix``: a long NAME is cut to fit), then rename it over ``path``: readers see the
+    old file or the new one, never half of one. Any OSError (a file in the way, a read-only folder, a full disk)
     becomes OutputError naming ``path``; the temporary file is removed
     (``outputs.remove_temp_files`` clears those a kill left). A symbolic link is written
     through (its target replaced, the link kept); a device, pipe or socket in the way is

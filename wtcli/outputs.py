@@ -9,8 +9,9 @@
   staging folder instead (``wtcli.plan.exports``).
 - ``check_not_inputs`` refuses an output that is one of the command's own inputs (usage,
   exit 2): writing it would replace what the user gave.
-- ``remove_temp_files`` clears the ``.NAME.XXXXXXXX`` temporaries a kill between write and
-  rename leaves behind; ``remove_stale`` drops an aggregate a rerun no longer vouches for.
+- ``remove_temp_files`` clears the temporaries (``.NAME.`` and 8 random characters, e.g.
+  ``.plan.json.k2x9q0ab``) a kill between write and rename leaves behind; ``remove_stale``
+  drops an aggregate a rerun no longer vouches for.
 """
 
 from __future__ import annotations
@@ -82,7 +83,7 @@ def writable_file(path: str | Path, what: str = "--out") -> Path:
 
 
 def remove_temp_files(folder: str | Path, names: str | None = None) -> list[Path]:
-    """Delete the ``.NAME.XXXXXXXX`` temporaries of atomic writes (left by a kill between write
+    """Delete the ``.NAME.k2x9q0ab`` temporaries of atomic writes (left by a kill between write
     and rename); returns what was removed. Without ``names``: every one under ``folder``, a
     folder of the command's own. With ``names``, a regular expression: only those of the files
     it matches, in ``folder`` itself (a command's own files in a folder it shares)."""

@@ -20,7 +20,7 @@ Every file is written atomically. A failing image is recorded and the batch goes
 or looping symbolic link to an image is such a failure too, not skipped, and so is an output
 name too long for the disk. An output that cannot be written otherwise (a full disk, a
 read-only subfolder) stops the batch instead: every later image would fail the same way after
-the network ran. Each run first removes temporaries a kill left (``.NAME.XXXXXXXX``) in the
+the network ran. Each run first removes temporaries a kill left (``.NAME.k2x9q0ab``) in the
 four subfolders and of the two files above, nothing else under ``OUT``; ``--resume`` redoes an
 image whose instances file cannot be read; a run where no image succeeds removes an earlier
 ``instances.json`` rather than leave it beside a report that says ``instances: null``.

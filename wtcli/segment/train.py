@@ -300,7 +300,7 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
             raise InputError(f"{out}: holds a run already ({', '.join(held)}); --resume to "
                              "continue it, or pick another --out")
     out.mkdir(parents=True, exist_ok=True)
-    remove_temp_files(out, RUN_FILES)  # what a kill mid-write left (.last.ckpt.XXXXXXXX)
+    remove_temp_files(out, RUN_FILES)  # what a kill mid-write left (.last.ckpt.k2x9q0ab)
     device = pick_device(cfg.device)
     if cfg.threads or device.type == "cpu":
         # One thread unless asked: on a shared or busy CPU, torch's thread pool spends more

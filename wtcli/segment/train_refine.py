@@ -447,7 +447,7 @@ def train_refiner(cfg: RefinerConfig, progress: Callable[[dict[str, Any]], None]
     out = Path(cfg.out)
     if not cfg.resume and (out / "data").is_dir() and any((out / "data").glob("part-*.npz")):
         raise InputError(f"{out}: holds a run already; --resume to continue it, or pick another --out")
-    # What a kill mid-write left (.part-0000.npz.XXXXXXXX, .last.ckpt.XXXXXXXX).
+    # What a kill mid-write left (.part-0000.npz.k2x9q0ab, .last.ckpt.k2x9q0ab).
     remove_temp_files(out, r"last\.ckpt|refiner\.pt|metrics\.json")
     remove_temp_files(out / "data", r"part-\d{4,}\.npz|photo-\d{4,}\.npz|photos\.json")
     if cfg.threads:

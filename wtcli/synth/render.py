@@ -700,7 +700,7 @@ def sample_seed(seed: int, index: int) -> int:
 
 
 # What a dataset folder of render_dataset holds: images/NNNNN.jpg, the two index files, and the
-# ".NAME.XXXXXXXX" temporaries a kill between write and rename leaves (jsonio.atomic_write_bytes).
+# ".NAME.k2x9q0ab" temporaries a kill between write and rename leaves (jsonio.atomic_write_bytes).
 _IMAGE_NAME = re.compile(r"^(\d{5,})\.jpg$")
 _INDEX_NAMES = ("instances.json", "ground_truth.json")
 _TEMP_OF = re.compile(r"^\.(.+)\.[a-z0-9_]{8}$")
