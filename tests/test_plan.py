@@ -593,6 +593,73 @@ def test_cli_reexport_replaces_the_earlier_set_and_says_so(cli, tmp_path):
                     "plan_UAV1_s2.kmz, plan_UAV1_s3.kmz and 2 more)")
 
 
+def test_cli_a_failed_export_leaves_the_earlier_plan_with_its_export(cli, tmp_path):
+    """The plan JSON is written only once the export is staged: an export refused part-way (a
+    folder in the way of one sortie file) leaves the earlier plan.json and its set together,
+    not the new plan beside the earlier plan's sorties."""
+    y = tmp_path / "short.yaml"
+    y.write_text(SAMPLE.read_text().replace("battery_minutes: 30", "battery_minutes: 18"))
+    exp, out = tmp_path / "exp", tmp_path / "plan.json"
+    r = cli("plan", y, "--out", out, "--export-dir", exp)
+    assert r.exit_code == 0, r.output
+    (exp / "plan_UAV1_s1.plan").unlink()
+    (exp / "plan_UAV1_s1.plan").mkdir()  # in the way of the new plan's first sortie
+    before = {p.name: p.read_bytes() for p in [out, *exp.iterdir()] if p.is_file()}
+    r = cli("plan", SAMPLE, "--out", out, "--export-dir", exp)
+    assert r.exit_code == 3, r.output
+    assert "plan_UAV1_s1.plan: cannot write (a folder is in the way)" in r.stderr
+    after = {p.name: p.read_bytes() for p in [out, *exp.iterdir()] if p.is_file()}
+    assert after == before, "the earlier plan.json and its export, as they were"
+    assert len(read_plan(out).routes[0].pos) > 0
+
+
+def test_cli_export_removes_the_staging_folder_a_killed_run_left(cli, tmp_path):
+    """A SIGKILL mid-export leaves its hidden staging folder: the next export into the folder
+    removes it when its owner is a dead process of this host, and keeps a live or foreign one."""
+    import os
+    import signal
+    import socket
+    import subprocess
+    import sys
+
+    from wtcli.plan.exports import OWNER_FILE, STAGING_PREFIX
+
+    exp = tmp_path / "exp"
+    exp.mkdir()
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        owners = {"dead": None, "live": (socket.gethostname(), os.getpid()),
+                  "foreign": ("another-host.example", 1), "unowned": None}
+        child.send_signal(signal.SIGKILL)
+        child.wait()
+        owners["dead"] = (socket.gethostname(), child.pid)
+        for name, owner in owners.items():
+            d = exp / f"{STAGING_PREFIX}{name}"
+            d.mkdir()
+            (d / "plan_UAV1_s1.plan").write_text("half\n")
+            if owner:
+                (d / OWNER_FILE).write_text(f"{owner[0]}\n{owner[1]}\n")
+    finally:
+        child.kill()
+    r = cli("plan", SAMPLE, "--out", tmp_path / "plan.json", "--export-dir", exp)
+    assert r.exit_code == 0, r.output
+    left = sorted(p.name for p in exp.iterdir() if p.name.startswith(STAGING_PREFIX))
+    assert left == [f"{STAGING_PREFIX}{n}" for n in ("foreign", "live", "unowned")]
+    assert f"exports: removed {exp / (STAGING_PREFIX + 'dead')}, a staging folder a killed run left" \
+        in r.stderr
+
+
+def test_cli_a_users_geojson_under_the_maps_name_is_refused_before_planning(cli, tmp_path):
+    exp = tmp_path / "exp"
+    exp.mkdir()
+    (exp / "plan.geojson").write_text('{"type": "FeatureCollection", "features": []}')
+    r = cli("plan", SAMPLE, "--out", tmp_path / "plan.json", "--export-dir", exp)
+    assert r.exit_code == 3, r.output
+    assert f"{exp / 'plan.geojson'}: is not the map of an earlier wtinspect export" in r.stderr
+    assert "blade azimuths" not in r.stderr and not (tmp_path / "plan.json").exists()
+    assert sorted(p.name for p in exp.iterdir()) == ["plan.geojson"]
+
+
 def test_cli_json_is_one_document(cli):
     r = cli("plan", SAMPLE, "--json")
     assert r.exit_code == 0

@@ -747,3 +747,23 @@ def test_a_uav_id_that_is_not_a_file_name_is_refused(tmp_path):
     with pytest.raises(ConfigError, match=r"fleet.uavs: '../UAV1' cannot be part of a file name"):
         export_all(p, tmp_path / "exp")
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("theirs", [
+    '{"type": "FeatureCollection", "features": [{"type": "Feature", "geometry": null, '
+    '"properties": {"name": "site boundary"}}]}',
+    '{"type": "FeatureCollection", "features": []}', "not json at all", ""])
+def test_a_users_own_geojson_under_the_maps_name_is_not_replaced(tmp_path, theirs):
+    """STEM.geojson is the export's map; a user's GeoJSON of that name (a site boundary) is
+    refused, exit 3 naming it, and nothing is written; an earlier export's map is replaced."""
+    from wtcli.errors import OutputError
+
+    (tmp_path / "plan.geojson").write_text(theirs)
+    with pytest.raises(OutputError, match=r"plan\.geojson: is not the map of an earlier wtinspect"):
+        export_all(small_plan(), tmp_path, stem="plan")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["plan.geojson"]
+    assert (tmp_path / "plan.geojson").read_text() == theirs
+    (tmp_path / "plan.geojson").unlink()
+    export_all(small_plan(), tmp_path, stem="plan")
+    done = export_all(_one_sortie_plan(), tmp_path, stem="plan")
+    assert tmp_path / "plan.geojson" in done.replaced

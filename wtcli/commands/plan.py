@@ -126,6 +126,10 @@ def register(app: typer.Typer) -> None:
             if export_dir is not None and not mission.site_origin:  # the exports are lat/lon
                 raise ConfigError(f"{turbines_yaml}: --export-dir writes lat/lon and needs "
                                   "site.origin (lat, lon, alt) in it")
+            stem = out.stem if out else "mission"  # the exports' names
+            if export_dir is not None:  # a user's own STEM.geojson: refused before planning
+                from wtcli.plan.exports import check_map_is_ours
+                check_map_is_ours(export_dir, stem)
             azimuths, sources = blade_azimuths(mission, list(inputs or []), _pose(camera_pose), fast=fast)
             for tid, src in sources.items():
                 err_console.print(f"{tid}: blade azimuths "
@@ -134,15 +138,20 @@ def register(app: typer.Typer) -> None:
             with stage_bars(PLAN_STAGE_TEXT) as progress:
                 result = plan_mission(mission, azimuths=azimuths or None, pattern=pattern, workers=jobs,
                                       progress=progress)
-            if out is not None:
-                write_plan(out, result)
+            write_out = (lambda: write_plan(out, result)) if out is not None else None
             if export_dir is not None:
+                # The plan JSON is written once the export is staged, before it replaces the
+                # earlier set: a failed export leaves the earlier plan and its export together.
                 fl = mission.fleet
-                stem = out.stem if out else "mission"
                 done = export_all(result, export_dir, stem=stem, cruise=fl.cruise_speed_m_s,
-                                  hover=fl.inspection_speed_m_s, dji=dji_kmz)
+                                  hover=fl.inspection_speed_m_s, dji=dji_kmz, before_swap=write_out)
+                for p in done.stale:
+                    err_console.print(f"exports: removed {p}, a staging folder a killed run left",
+                                      soft_wrap=True)
                 err_console.print(f"exports: {len(done.written)} file(s) -> {export_dir}"
                                   + _replaced_text(done, stem), soft_wrap=True)
+            elif write_out is not None:
+                write_out()
             if picture is not None:  # encoded as its name says
                 ok, buf = cv2.imencode(picture.suffix.lower(), draw_plan(result))
                 atomic_write_bytes(picture, buf.tobytes())

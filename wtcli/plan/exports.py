@@ -27,9 +27,11 @@ import math
 import os
 import re
 import shutil
+import socket
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -186,6 +188,7 @@ class ExportSet:
     written: tuple[Path, ...]
     replaced: tuple[Path, ...] = ()
     removed: tuple[Path, ...] = ()
+    stale: tuple[Path, ...] = ()  # staging folders of killed runs, removed
 
 
 # STEM_UAV_sN.EXT: the sortie files of one export set (STEM.geojson is the set's map).
@@ -194,14 +197,21 @@ STAGING_PREFIX = ".wtinspect-exports."
 
 
 def export_all(plan: Plan, out_dir: str | Path, stem: str = "mission", cruise: float = 8.0,
-               hover: float = 2.0, dji: str | None = None) -> ExportSet:
+               hover: float = 2.0, dji: str | None = None,
+               before_swap: Callable[[], None] | None = None) -> ExportSet:
     """Write ``STEM_UAV_sN.plan`` and ``.waypoints`` per UAV sortie and ``STEM.geojson``; with
     ``dji`` (a key of ``wtcli.plan.dji_kmz.AIRCRAFT``) also a DJI WPML ``STEM_UAV_sN.kmz``.
 
     The files are one set: written into a staging folder inside ``out_dir`` first; only when
     all are written are the earlier export files of ``stem`` removed and the new ones renamed
     in. A failure before that (a full disk: OutputError naming the file) leaves the earlier set
-    whole; files of other stems and other files are never touched."""
+    whole; files of other stems and other files are never touched. ``before_swap`` runs once
+    the set is staged, before the earlier set is touched (``plan`` writes its plan JSON there,
+    so a failed export leaves the earlier plan and its export together); if it raises, nothing
+    is swapped.
+
+    A staging folder that a killed run left (its owner file names a process of this host that
+    no longer runs) is removed first; one of a running or another host's run is left alone."""
     from wtcli.plan import dji_kmz
 
     _require_origin(plan)
@@ -229,17 +239,19 @@ def export_all(plan: Plan, out_dir: str | Path, stem: str = "mission", cruise: f
                                                         indent=1, allow_nan=False))
         yield f"{stem}.geojson", _text(json.dumps(geojson_dict(plan), allow_nan=False))
 
-    return _write_set(Path(out_dir), stem, files())
+    return _write_set(Path(out_dir), stem, files(), before_swap)
 
 
 def _text(s: str) -> bytes:
     return (s if s.endswith("\n") else s + "\n").encode("utf-8")
 
 
-def _write_set(out_dir: Path, stem: str, files) -> ExportSet:
+def _write_set(out_dir: Path, stem: str, files, before_swap=None) -> ExportSet:
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
+        stale = _remove_stale_staging(out_dir)
         staging = Path(tempfile.mkdtemp(prefix=STAGING_PREFIX, dir=out_dir))
+        (staging / OWNER_FILE).write_text(f"{socket.gethostname()}\n{os.getpid()}\n", encoding="utf-8")
     except OSError as e:
         raise write_failed(out_dir, e) from None
     try:
@@ -249,6 +261,9 @@ def _write_set(out_dir: Path, stem: str, files) -> ExportSet:
             names.append(name)
         for name in names:  # checked before the earlier set is touched
             _check_in_the_way(out_dir / name)
+        check_map_is_ours(out_dir, stem)
+        if before_swap is not None:
+            before_swap()
         earlier = earlier_exports(out_dir, stem)
         # The earlier set goes before the new one comes in: an interruption in between leaves
         # part of one plan (the map last), never the sorties of two plans side by side.
@@ -267,7 +282,41 @@ def _write_set(out_dir: Path, stem: str, files) -> ExportSet:
     new = set(names)
     return ExportSet(tuple(out_dir / n for n in names),
                      tuple(p for p in earlier if p.name in new),
-                     tuple(p for p in earlier if p.name not in new))
+                     tuple(p for p in earlier if p.name not in new), stale)
+
+
+OWNER_FILE = "owner"  # in a staging folder: "HOST\nPID\n" of the run writing it
+
+
+def _remove_stale_staging(out_dir: Path) -> tuple[Path, ...]:
+    """Remove the staging folders in ``out_dir`` whose run was killed (SIGKILL, power loss):
+    their owner file names this host and a process id that no longer runs. A folder of a
+    running export, of another host (a shared disk) or without a readable owner file is kept."""
+    host, gone = socket.gethostname(), []
+    for e in os.scandir(out_dir):
+        if not e.name.startswith(STAGING_PREFIX) or not e.is_dir(follow_symlinks=False):
+            continue
+        try:
+            owner_host, pid = (Path(e.path) / OWNER_FILE).read_text(encoding="utf-8").split()
+            pid = int(pid)
+        except (OSError, ValueError):
+            continue
+        if owner_host != host or pid <= 0 or _running(pid):
+            continue
+        shutil.rmtree(e.path, ignore_errors=True)
+        if not os.path.lexists(e.path):
+            gone.append(Path(e.path))
+    return tuple(gone)
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # PermissionError: another user's process runs under that id
+        return True
+    return True
 
 
 def _stage(tmp: Path, final: Path, data: bytes) -> None:
@@ -288,6 +337,33 @@ def _check_in_the_way(path: Path) -> None:
     if path.is_dir():
         raise write_failed(path, IsADirectoryError(errno.EISDIR, "a folder is in the way"))
     raise OutputError(f"{path}: is not a regular file (a device, pipe or socket); write to a file")
+
+
+MAP_KINDS = ("turbine", "route", "photos")  # the features' properties.kind in STEM.geojson
+MAX_MAP_BYTES = 512 * 2 ** 20
+
+
+def check_map_is_ours(out_dir: str | Path, stem: str) -> None:
+    """OutputError (exit 3) when ``STEM.geojson`` in ``out_dir`` is not the map of an earlier
+    export (a user's own GeoJSON under that name: a site boundary, a survey), which the export
+    would replace. Ours: a FeatureCollection whose features are all turbines, routes and photo
+    points (``properties.kind``), at least one route among them."""
+    path = Path(out_dir) / f"{stem}.geojson"
+    if not path.is_file():
+        return
+    ours = False
+    try:
+        if path.stat().st_size <= MAX_MAP_BYTES:
+            doc = json.loads(path.read_bytes())
+            kinds = [f["properties"]["kind"] for f in doc["features"]]
+            ours = (doc.get("type") == "FeatureCollection" and "route" in kinds
+                    and all(k in MAP_KINDS for k in kinds))
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        pass
+    if not ours:
+        raise OutputError(f"{path}: is not the map of an earlier wtinspect export, and this "
+                          f"export's map would replace it; move it, or pick another --out name "
+                          f"(the exports are named after it)")
 
 
 def earlier_exports(out_dir: str | Path, stem: str) -> list[Path]:
