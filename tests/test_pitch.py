@@ -794,6 +794,24 @@ def test_overlay_names_are_one_file_per_image():
     assert overlay_names(recs)[1] == "Site/a.jpg_pitch.png"
 
 
+def test_overlay_names_near_the_limit_are_cut_to_fit_and_stay_apart():
+    """A photo named within `_pitch.png` of the 255-byte limit (segment wrote its masks) gets an
+    overlay name cut to fit, a hash of its path after the cut, so two such names stay apart;
+    multi-byte characters are cut whole."""
+    from wtcli.pitch import overlay_names
+
+    long_a, long_b = "site/" + "a" * 246 + "1.jpg", "site/" + "a" * 246 + "2.jpg"
+    wide = "é" * 125 + ".jpg"  # 250 bytes
+    names = overlay_names([{"file_name": f} for f in (long_a, long_b, wide, "short.jpg")])
+    assert names[3] == "short_pitch.png"
+    for n in names[:3]:
+        last = n.rpartition("/")[2]
+        assert len(last.encode()) <= 255 and last.endswith("_pitch.png"), n
+        last.encode().decode("utf-8")
+    assert names[0] != names[1] and names[0].startswith("site/aaaa")
+    assert names[2].startswith("é" * 100)
+
+
 def test_cli_overlays_of_photos_with_one_name_do_not_overwrite_each_other(cli, tmp_path):
     """A ``segment -r`` batch of site1/IMG_0001.JPG and site2/IMG_0001.JPG, and dup.jpg beside
     dup.png: four overlays, each drawn on its own photo."""

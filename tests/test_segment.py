@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import cv2
@@ -1202,28 +1203,56 @@ def test_sigterm_sums_up_the_photos_done_as_ctrl_c(photo_folder, random_weights,
     assert [img["file_name"] for img, _ in read_instances(out / "instances.json")] == ["a.png"]
 
 
-def test_a_name_too_long_for_the_disk_fails_that_photo_alone(cli, random_weights, tmp_path,
-                                                             monkeypatch):
-    """A photo named close to the 255-byte limit: 250 characters are written (the atomic
-    writer's temporary name is cut to fit); at 255, `instances/NAME.json` would be 256, which no
-    disk takes: that photo fails (exit 9 at the end), the batch goes on."""
+def test_a_name_near_the_limit_gets_outputs_cut_to_fit(cli, random_weights, tmp_path, monkeypatch):
+    """A photo named close to the 255-byte limit: at 250 characters `instances/NAME.json` fits;
+    at 255 it would be 256 bytes, which no disk takes, so NAME is cut to fit with a hash of the
+    photo's path after it, and report.json names the files."""
     _fake_segment(monkeypatch)
     folder = tmp_path / "photos"
     folder.mkdir()
-    ok, too_long = "p" * 246 + ".png", "q" * 251 + ".png"
-    for name in (ok, too_long, "z.png"):
+    ok, long = "p" * 246 + ".png", "q" * 251 + ".png"
+    for name in (ok, long, "z.png"):
+        cv2.imwrite(str(folder / name), _image(seed=len(name)))
+    out = tmp_path / "seg"
+    res = cli("segment", folder, "--out", out, "--model", random_weights, "--no-refine")
+    assert res.exit_code == 0, res.stderr[-800:]
+    report = json.loads((out / "report.json").read_text())
+    rows = {r["file"]: r for r in report["images"]}
+    assert {k: r["status"] for k, r in rows.items()} == {ok: "ok", long: "ok", "z.png": "ok"}
+    assert (out / "instances" / ("p" * 246 + ".json")).is_file()
+    for kind, path in rows[long]["outputs"].items():
+        name = Path(path).name
+        assert Path(path).is_file() and len(name.encode()) <= 255, (kind, name)
+        assert re.fullmatch(r"q+~[0-9a-f]{8}\.(json|png)", name), name
+    assert [p for p in out.rglob(".*")] == []  # no temporary left
+    res = cli("segment", folder, "--out", out, "--model", random_weights, "--no-refine", "--resume")
+    assert res.exit_code == 0, res.stderr[-800:]
+    report = json.loads((out / "report.json").read_text())
+    assert {r["file"]: r["status"] for r in report["images"]} == {
+        ok: "skipped", long: "skipped", "z.png": "skipped"}
+
+
+def test_a_name_the_disk_refuses_fails_that_photo_alone(cli, random_weights, tmp_path,
+                                                        monkeypatch):
+    """A file system with a shorter limit than the 255 bytes names are cut to (eCryptfs: 143)
+    refuses a name: that photo fails (exit 9 at the end), the batch goes on."""
+    import wtcli.jsonio
+
+    _fake_segment(monkeypatch)
+    monkeypatch.setattr(wtcli.jsonio, "NAME_MAX", 1000)  # as if the limit were higher than the disk's
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    too_long = "q" * 251 + ".png"
+    for name in (too_long, "z.png"):
         cv2.imwrite(str(folder / name), _image(seed=len(name)))
     out = tmp_path / "seg"
     res = cli("segment", folder, "--out", out, "--model", random_weights, "--no-refine")
     assert res.exit_code == ExitCode.PARTIAL, res.stderr[-800:]
     report = json.loads((out / "report.json").read_text())
     status = {r["file"]: (r["status"], r["error"]) for r in report["images"]}
-    assert status[ok] == ("ok", None) and status["z.png"] == ("ok", None)
+    assert status["z.png"] == ("ok", None)
     assert status[too_long][0] == "error" and "File name too long" in status[too_long][1]
-    assert (out / "instances" / ("p" * 246 + ".json")).is_file()
-    assert [p for p in out.rglob(".*")] == []  # no temporary left
     res = cli("segment", folder, "--out", out, "--model", random_weights, "--no-refine", "--resume")
     assert res.exit_code == ExitCode.PARTIAL, res.stderr[-800:]  # --resume gets past it too
     report = json.loads((out / "report.json").read_text())
-    assert {r["file"]: r["status"] for r in report["images"]} == {
-        ok: "skipped", too_long: "error", "z.png": "skipped"}
+    assert {r["file"]: r["status"] for r in report["images"]} == {too_long: "error", "z.png": "skipped"}

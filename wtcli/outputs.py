@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 import errno
+import hashlib
 import os
 import re
 import tempfile
@@ -199,13 +200,17 @@ def _clashing(names: list[str]) -> set[int]:
     return {k for ks in seen.values() if len(ks) > 1 for k in ks}
 
 
-def distinct_names(paths: list[str], suffix: str = "") -> list[str]:
+def distinct_names(paths: list[str], suffix: str = "", room: int = 0) -> list[str]:
     """One output name per input file (a relative posix path), so that no two overwrite each
     other: the path without its extension, then ``suffix``; where two would meet (compared
     without case, as macOS and Windows disks do) each keeps its extension (``dup.jpg`` and
     ``dup.png``); names still alike get ``~2``, ``~3`` after all but the first in sorted order.
     Decided from the whole set, not its order (a path given twice: numbered in input order).
-    ``segment``'s outputs and ``pitch``'s overlays are named so."""
+    ``segment``'s outputs and ``pitch``'s overlays are named so.
+
+    A file name that would pass the 255-byte limit with ``suffix`` and ``room`` more bytes (an
+    extension the caller adds) is cut to fit, ``~`` and 8 hex digits of its path's hash after
+    the cut, so a photo whose own name is near the limit still gets its outputs."""
     parts = [PurePosixPath(p) for p in paths]
 
     def named(k: int, stem: str) -> str:
@@ -225,4 +230,18 @@ def distinct_names(paths: list[str], suffix: str = "") -> list[str]:
             cand = named(k, f"{parts[k].name}~{j}")
         taken.add(_fold(cand))
         names[k] = cand
-    return names
+    return [_fit(n, paths[k], suffix, room) for k, n in enumerate(names)]
+
+
+def _fit(name: str, path: str, suffix: str, room: int) -> str:
+    from wtcli.jsonio import NAME_MAX
+
+    head, _, last = name.rpartition("/")
+    if len(os.fsencode(last)) + room <= NAME_MAX:
+        return name
+    tag = "~" + hashlib.sha1(os.fsencode(path)).hexdigest()[:8]
+    body = last[:len(last) - len(suffix)] if suffix and last.endswith(suffix) else last
+    keep = NAME_MAX - room - len(os.fsencode(tag + suffix))
+    # Cut on a character, not inside one.
+    cut = os.fsencode(body)[:max(keep, 1)].decode("utf-8", "ignore")
+    return (head + "/" if head else "") + cut + tag + suffix

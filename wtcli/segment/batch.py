@@ -159,7 +159,8 @@ def output_names(rels: list[str]) -> dict[str, str]:
     in case."""
     from wtcli.outputs import distinct_names
 
-    return dict(zip(rels, distinct_names([Path(r).as_posix() for r in rels])))
+    # room: the longest extension output_paths adds (".json")
+    return dict(zip(rels, distinct_names([Path(r).as_posix() for r in rels], room=len(".json"))))
 
 
 def output_paths(out: Path, rel: str, name: str = "") -> dict[str, Path]:
