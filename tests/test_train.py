@@ -280,6 +280,55 @@ def test_tiny_run_averaged_with_its_init(tmp_path):
     assert torch.allclose(avg, (i + t) / 2, atol=1e-3) and not torch.equal(i, t)
 
 
+def test_weight_average_is_the_exponential_moving_average():
+    from wtcli.segment.train import WeightAverage
+
+    m = torch.nn.Linear(2, 1)
+    m.register_buffer("steps", torch.tensor(0))
+    with torch.no_grad():
+        m.weight.fill_(1.0)
+    ema = WeightAverage(m, 0.9)
+    for value in (2.0, 4.0):
+        with torch.no_grad():
+            m.weight.fill_(value)
+            m.steps += 1
+        ema.update(m)
+    want = 0.9 * (0.9 * 1.0 + 0.1 * 2.0) + 0.1 * 4.0
+    assert torch.allclose(ema.state["weight"], torch.full((1, 2), want))
+    assert int(ema.state["steps"]) == 2  # an integer buffer follows as it is
+    ema.copy_to(m)
+    assert torch.allclose(m.weight, torch.full((1, 2), want))
+
+
+def test_ema_run_ships_the_average_and_resumes_it(tmp_path):
+    """--ema: model.pt holds the averaged weights (the checkpoint keeps both), a resumed run
+    goes on averaging where it stood, and the average is resumed only as it was started."""
+    _seed_all(3)
+    save_weights(build_model(), tmp_path / "init.pt")
+    cfg = dict(eval_count=0, init=str(tmp_path / "init.pt"), seed=3, ema=0.5, lr=1e-3)
+    train(_tiny(tmp_path, iterations=2, **cfg))
+    run = tmp_path / "run"
+    ck = torch.load(run / "last.ckpt", weights_only=True)
+    k = "roi_heads.box_head.fc6.weight"
+    last, avg = ck["state_dict"][k], ck["ema_state_dict"][k]
+    assert not torch.equal(last, avg)
+    shipped = build_model()
+    meta = load_weights(shipped, run / "model.pt")
+    assert meta["ema"] == 0.5
+    assert torch.allclose(shipped.state_dict()[k], avg, atol=1e-3)
+    export_checkpoint(run / "last.ckpt", tmp_path / "exported.pt")
+    load_weights(shipped, tmp_path / "exported.pt")
+    assert torch.allclose(shipped.state_dict()[k], avg, atol=1e-3)
+    with pytest.raises(ConfigError, match="ema 0.5"):
+        train(_tiny(tmp_path, iterations=3, resume=True, **{**cfg, "ema": 0.0}))
+    train(_tiny(tmp_path, iterations=3, resume=True, **cfg))
+    ck3 = torch.load(run / "last.ckpt", weights_only=True)
+    want = 0.5 * avg + 0.5 * ck3["state_dict"][k]
+    assert torch.allclose(ck3["ema_state_dict"][k], want, atol=1e-6)
+    with pytest.raises(ConfigError, match="--ema"):
+        train(_tiny(tmp_path / "bad", ema=1.0))
+
+
 # ---- labelled real photos: semantic masks -> instances, mixed batches, held-out sequences ----
 def _blade(hub, angle_deg, length=120, root=14, tip=4):
     import math

@@ -71,6 +71,10 @@ def train(
                                                      metavar="SEQ",
                                                      help="Leave this flight sequence of --real "
                                                           "out (repeatable), to measure on it."),
+    ema: float = typer.Option(0.0, "--ema",
+                              help="Ship an exponential moving average of the weights, this "
+                                   "decay per step (e.g. 0.99: about the last 100 steps); 0: the "
+                                   "last step's weights."),
     resume: bool = typer.Option(False, "--resume",
                                 help="Continue from OUT/last.ckpt (a folder holding a run is "
                                      "otherwise refused)."),
@@ -118,7 +122,7 @@ def train(
                       precision=precision, fine_lr_mult=fine_lr_mult,
                       average_with=str(average_with) if average_with else None,
                       view_mix=view_mix, real=str(real) if real else None, real_share=real_share,
-                      real_holdout=tuple(real_holdout or ()))
+                      real_holdout=tuple(real_holdout or ()), ema=ema)
     report = _Report(iterations, max_minutes, checkpoint_every)
     try:
         summary = run_training(cfg, progress=report.step,

@@ -80,6 +80,9 @@ class TrainConfig:
     real: str | None = None
     real_share: float = 0.3
     real_holdout: tuple[str, ...] = ()
+    # Keep an exponential moving average of the weights (decay per step; 0: off) and ship it as
+    # model.pt: one run's last steps, averaged, depend less on the last few batches it drew.
+    ema: float = 0.0
 
     def check(self) -> None:
         def need(ok: bool, what: str) -> None:
@@ -97,6 +100,7 @@ class TrainConfig:
         need(self.max_minutes is None or self.max_minutes > 0, "expected --max-minutes > 0")
         need(0.0 <= self.stops <= 1.0, f"expected --stops in [0, 1], got {self.stops}")
         need(0.0 < self.real_share <= 1.0, f"expected --real-share in (0, 1], got {self.real_share}")
+        need(0.0 <= self.ema < 1.0, f"expected --ema in [0, 1), got {self.ema}")
         if self.view_mix is not None:
             from wtcli.synth.render import parse_view_mix
 
@@ -229,12 +233,37 @@ class _Chunks:
             yield [int(j) for j in self.order[i * self.size:(i + 1) * self.size]]
 
 
+class WeightAverage:
+    """An exponential moving average of a model's floating-point state (weights and buffers):
+    after each step ``avg = decay * avg + (1 - decay) * now``. Integer buffers follow as they are."""
+
+    def __init__(self, model, decay: float, state: dict[str, torch.Tensor] | None = None) -> None:
+        self.decay = decay
+        now = model.state_dict()
+        self.state = {k: (state[k] if state is not None and k in state else v).detach().clone().float()
+                      if v.is_floating_point() else v.detach().clone() for k, v in now.items()}
+
+    @torch.no_grad()
+    def update(self, model) -> None:
+        for k, v in model.state_dict().items():
+            avg = self.state[k]
+            if v.is_floating_point():
+                avg.mul_(self.decay).add_(v.detach().float(), alpha=1.0 - self.decay)
+            else:
+                avg.copy_(v)
+
+    def copy_to(self, model) -> None:
+        now = model.state_dict()
+        model.load_state_dict({k: v.to(now[k].dtype) for k, v in self.state.items()})
+
+
 def _save_ckpt(path: Path, model, opt, it: int, cfg: TrainConfig, elapsed: float,
-               history: list[dict]) -> None:
+               history: list[dict], ema: WeightAverage | None = None) -> None:
     buf = io.BytesIO()
     torch.save({"arch": ARCH, "state_dict": model.state_dict(), "optimizer": opt.state_dict(),
                 "iteration": it, "elapsed_s": elapsed, "config": _cfg_dict(cfg),
-                "history": history[-2000:]}, buf)
+                "history": history[-2000:],
+                **({"ema_state_dict": ema.state} if ema is not None else {})}, buf)
     atomic_write_bytes(path, buf.getvalue())
 
 
@@ -249,7 +278,7 @@ def _cfg_dict(cfg: TrainConfig) -> dict[str, Any]:
 # A run may be resumed longer (--iterations, --max-minutes) or elsewhere (device, threads).
 RESUME_SAME = ("data", "real", "real_share", "real_holdout", "seed", "batch_size", "lr", "warmup",
                "weight_decay", "width", "height", "train_sizes", "stops", "view_mix", "augment",
-               "synth_count", "init")
+               "synth_count", "init", "ema")
 
 
 def _same_run(path: Path, was: dict[str, Any], cfg: TrainConfig) -> None:
@@ -350,6 +379,12 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
             raise ConfigError(f"{ckpt_path}: the run was started with --fine-lr-mult {was:g}; "
                               f"resume it with that (asked {cfg.fine_lr_mult:g})")
         opt.load_state_dict(state["optimizer"])
+    ema = None
+    if cfg.ema:
+        saved_ema = state.get("ema_state_dict") if state is not None else None
+        if state is not None and saved_ema is None:
+            raise ConfigError(f"{ckpt_path}: the run was started without --ema; resume it without")
+        ema = WeightAverage(model, cfg.ema, saved_ema)
     t0 = time.monotonic()
     it = start_it
     last_ckpt_it = it
@@ -380,6 +415,8 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
                 loss.backward()
                 torch.nn.utils.clip_grad_norm_(params, 10.0)
                 opt.step()
+                if ema is not None:
+                    ema.update(model)
                 it += 1
                 rec = {"iteration": it, "loss": loss.item(), "lr": cfg.lr * f,
                        **{k: v.item() for k, v in losses.items()}}
@@ -387,7 +424,7 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
                 if progress:
                     progress({**rec, "total": cfg.iterations, "elapsed_s": elapsed0 + time.monotonic() - t0})
                 if it - last_ckpt_it >= cfg.checkpoint_every:
-                    _save_ckpt(ckpt_path, model, opt, it, cfg, elapsed0 + time.monotonic() - t0, history)
+                    _save_ckpt(ckpt_path, model, opt, it, cfg, elapsed0 + time.monotonic() - t0, history, ema)
                     last_ckpt_it = it
                 if it >= cfg.iterations:
                     break
@@ -396,14 +433,16 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
                     break
     except KeyboardInterrupt:  # Ctrl-C: the steps since the last checkpoint are kept
         if it > last_ckpt_it:
-            _save_ckpt(ckpt_path, model, opt, it, cfg, elapsed0 + time.monotonic() - t0, history)
+            _save_ckpt(ckpt_path, model, opt, it, cfg, elapsed0 + time.monotonic() - t0, history, ema)
         raise
     except WtError as e:
         raise _from_worker(e) from None
 
     elapsed = elapsed0 + time.monotonic() - t0
     backbone_in_bf16(model, False)  # the plain float32 backbone for the end-of-run check
-    _save_ckpt(ckpt_path, model, opt, it, cfg, elapsed, history)
+    _save_ckpt(ckpt_path, model, opt, it, cfg, elapsed, history, ema)
+    if ema is not None:  # the averaged weights are the run's result (the checkpoint keeps both)
+        ema.copy_to(model)
     model.eval()
     set_infer_size(model)
     save_weights(model, out / "model.pt", meta={"iterations": it, "train_seconds": round(elapsed, 1),
@@ -412,6 +451,7 @@ def train(cfg: TrainConfig, progress: Callable[[dict[str, Any]], None] | None = 
                                                     "real_holdout": list(cfg.real_holdout)}
                                                    if cfg.real else {}),
                                                 "precision": precision,
+                                                **({"ema": cfg.ema} if cfg.ema else {}),
                                                 "mask_offset_px": MASK_OFFSET_PX})
     if cfg.average_with:
         average_weights([out / "model.pt", cfg.average_with], out / AVERAGE_NAME)
@@ -459,7 +499,8 @@ def export_checkpoint(ckpt: str | Path, weights: str | Path) -> Path:
     """A training checkpoint (OUT/last.ckpt) -> the shipped float16 weights file."""
     state = _load_ckpt(Path(ckpt))
     model = build_model()
-    model.load_state_dict(state["state_dict"])
+    # A run with --ema ships its averaged weights; its checkpoint holds both.
+    model.load_state_dict(state.get("ema_state_dict") or state["state_dict"])
     meta = {"iterations": int(state.get("iteration", 0)),
             "train_seconds": round(float(state.get("elapsed_s", 0.0)), 1),
             "data": (state.get("config") or {}).get("data") or "synthetic",
