@@ -298,6 +298,44 @@ def test_train_refiner_takes_labelled_photos_as_a_coco_file(tmp_path):
     assert listing["photos"] == ["00000", "00001"] and s["photo_pixels"] > 0
 
 
+def test_pixels_of_unknown_truth_teach_the_refiner_nothing():
+    """A COCO file's crowd and box-only regions are no instance and no background: their band
+    pixels are left out of the refiner's samples (they were taught as background)."""
+    from wtcli.segment.train_refine import image_samples
+
+    img, truth = _blade_photo()
+    pred = _inst(truth)
+    union = {"blade": truth}
+    every = image_samples(img, pred, union, 10 ** 6, np.random.default_rng(0))[1]
+    left = np.zeros_like(truth)
+    left[:, :160] = True
+    kept = image_samples(img, pred, union, 10 ** 6, np.random.default_rng(0), ignore=left)[1]
+    assert 0.3 * len(every) < len(kept) < 0.7 * len(every)
+    none = image_samples(img, pred, union, 10 ** 6, np.random.default_rng(0),
+                         ignore=np.ones_like(truth))[1]
+    assert len(none) == 0
+
+
+def test_labelled_photos_of_a_coco_file_carry_its_ignore_regions(tmp_path):
+    import copy
+
+    from wtcli.segment.train_refine import labelled_photos
+    from wtcli.synth.render import render_dataset
+
+    render_dataset(tmp_path / "coco", count=1, seed=5, width=240, height=180, view="front",
+                   progress=False)
+    path = tmp_path / "coco" / "instances.json"
+    doc = json.loads(path.read_text())
+    crowd = copy.deepcopy(next(a for a in doc["annotations"] if a["category_id"] == 1))
+    crowd.update(id=10 ** 6, iscrowd=1)
+    doc["annotations"].append(crowd)
+    path.write_text(json.dumps(doc))
+    (name, load), = labelled_photos(RefinerConfig(out=str(tmp_path / "run"), real=str(path)))
+    img, truth, ignore = load()
+    assert ignore is not None and ignore.shape == img.shape[:2] and ignore.any()
+    assert set(truth) == {"blade", "tower"}
+
+
 def test_init_starts_from_the_weights_given_and_checks_the_widths(tmp_path):
     rng = np.random.default_rng(0)
     X = rng.normal(size=(25_000, R.N_FEATURES)).astype(np.float16)

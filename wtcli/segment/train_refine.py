@@ -104,10 +104,12 @@ def class_unions(truth) -> dict[str, np.ndarray]:
 
 
 def image_samples(image: np.ndarray, pred, union: dict[str, np.ndarray], per_instance: int,
-                  rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+                  rng: np.random.Generator, ignore: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """(features [N, F] float16, targets [N] bool) of the band pixels of each predicted
     instance whose class ``union`` holds; target: ``union`` of the instance's class covers the
-    pixel."""
+    pixel. Pixels in ``ignore`` (a COCO file's crowd and box-only regions: their truth is
+    unknown) are left out."""
     xs, ys = [], []
     for k in range(len(pred)):
         if pred.labels[k] not in union:
@@ -116,6 +118,10 @@ def image_samples(image: np.ndarray, pred, union: dict[str, np.ndarray], per_ins
         if got is None or not len(got[3]):
             continue
         (y0, x0), img, m, px = got
+        if ignore is not None:
+            px = px[~ignore[y0 + px[:, 0], x0 + px[:, 1]]]
+            if not len(px):
+                continue
         if len(px) > per_instance:
             px = px[np.sort(rng.choice(len(px), per_instance, replace=False))]
         xs.append(R.features(img, m, pred.labels[k], px[:, 0], px[:, 1]).astype(np.float16))
@@ -167,9 +173,10 @@ def make_data(cfg: RefinerConfig, progress: Callable[[dict[str, Any]], None] | N
 
 def labelled_photos(cfg: RefinerConfig) -> list[tuple[str, Callable[[], tuple[np.ndarray, dict]]]]:
     """The photos of ``cfg.real`` that are not held out, as (name, loader); a loader gives the
-    photo at its own size and the truth of the classes a photo teaches the refiner: blade, and
+    photo at its own size, the truth of the classes a photo teaches the refiner: blade, and
     tower with nacelle as one (a photo folder's class 2 holds both; the nacelle's own edges come
-    from the renders, which label it)."""
+    from the renders, which label it), and the pixels whose truth is unknown (a COCO file's
+    crowd and box-only regions) or None."""
     from wtcli.segment import real as RP
     from wtcli.segment.data import RealDataset
 
@@ -181,13 +188,14 @@ def labelled_photos(cfg: RefinerConfig) -> list[tuple[str, Callable[[], tuple[np
 
             def load(photo=photo):
                 img, sem = RP.read_pair(photo, None)
-                return img, {"blade": sem == RP.BLADE, "tower": sem == RP.TOWER}
+                return img, {"blade": sem == RP.BLADE, "tower": sem == RP.TOWER}, None
             out.append((photo.name, load))
         else:
             def load(k=k):
                 smp = ds.coco.load(k)
                 u = class_unions(smp.instances)
-                return smp.image, {"blade": u["blade"], "tower": u["tower"] | u["nacelle"]}
+                return (smp.image, {"blade": u["blade"], "tower": u["tower"] | u["nacelle"]},
+                        smp.ignore)
             out.append((Path(str(ds.coco.items[k][0].get("file_name", k))).stem, load))
     return out
 
@@ -231,14 +239,15 @@ def make_photo_data(cfg: RefinerConfig, progress: Callable[[dict[str, Any]], Non
             model = load_model(cfg.model)
         X, Y = [], []
         for i, (name, load) in enumerate(chunk, p0):
-            img, truth = load()
+            img, truth, ignore = load()
             pred = segment_image(img, model=model, refine=False)
             small, pred = at_refine_size(img, pred)
             if small.shape[:2] != img.shape[:2]:
                 h, w = small.shape[:2]
                 truth = {c: _resize_mask(m, w, h) for c, m in truth.items()}
+                ignore = None if ignore is None else _resize_mask(ignore, w, h)
             rng = np.random.default_rng([cfg.seed, PHOTO_STREAM + i])
-            x, y = image_samples(small, pred, truth, cfg.per_instance, rng)
+            x, y = image_samples(small, pred, truth, cfg.per_instance, rng, ignore)
             X.append(x)
             Y.append(y)
             if progress:
