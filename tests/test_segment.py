@@ -1016,6 +1016,42 @@ def _fake_segment(monkeypatch):
     monkeypatch.setattr(infer, "segment_image", fake)
 
 
+def test_photos_segment_does_not_read_are_said_not_silently_left_out(cli, random_weights,
+                                                                    tmp_path, monkeypatch):
+    """A drone's folder: a .DNG beside each .JPG, a phone's .HEIC. The JPEGs are segmented, the
+    rest counted on stderr and in report.json; a folder of raw files alone, or one given by
+    name, is refused (exit 3) saying what to do."""
+    _fake_segment(monkeypatch)
+    folder = tmp_path / "DCIM"
+    (folder / "sub").mkdir(parents=True)
+    cv2.imwrite(str(folder / "DJI_0001.JPG"), _image())
+    for name in ("DJI_0001.DNG", "DJI_0002.DNG", "IMG_7.HEIC", ".hidden.dng", "flight.SRT",
+                 "sub/DJI_0003.DNG"):
+        (folder / name).write_bytes(b"\0" * 64)
+    out = tmp_path / "seg"
+    res = cli("segment", folder, "--out", out, "--model", random_weights, "--no-refine")
+    assert res.exit_code == 0, res.stderr[-800:]
+    assert (f"note: 3 photo(s) in {folder} not read: 2 .DNG (raw), 1 .HEIC (HEIF) — use the "
+            "JPEG the camera saved beside each raw file, or convert them to .jpg") in res.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert report["not_read"] == {".DNG": 2, ".HEIC": 1} and report["n_images"] == 1
+    res = cli("segment", folder, "--out", tmp_path / "seg-r", "--recursive", "--model",
+              random_weights, "--no-refine")
+    assert json.loads((tmp_path / "seg-r" / "report.json").read_text())["not_read"] == {
+        ".DNG": 3, ".HEIC": 1}
+    (folder / "DJI_0001.JPG").unlink()
+    res = cli("segment", folder, "--out", tmp_path / "seg2", "--model", random_weights)
+    assert res.exit_code == ExitCode.INPUT
+    assert res.stderr.strip().endswith("it holds photos segment does not read: 2 .DNG (raw), "
+                                       "1 .HEIC (HEIF) — use the JPEG the camera saved beside "
+                                       "each raw file, or convert them to .jpg, .jpeg, .png, "
+                                       ".tif, .tiff")
+    for name, kind in (("DJI_0001.DNG", "raw"), ("IMG_7.HEIC", "HEIF")):
+        res = cli("segment", folder / name, "--out", tmp_path / "seg3", "--model", random_weights)
+        assert res.exit_code == ExitCode.INPUT
+        assert f"{folder / name}: a {kind} photo, which wtinspect does not read;" in res.stderr
+
+
 def test_output_names_keep_apart_photos_that_would_share_one():
     names = batch.output_names(["dup.jpg", "dup.png", "a.jpg", "s/x.jpg", "t/x.jpg",
                                 "IMG_1.jpg", "IMG_1.JPG", "b.JPG"])

@@ -60,8 +60,8 @@ def segment(
     from wtcli.console import count_bar, err_console
     from wtcli.errors import InputError, OutputError, PartialFailure
     from wtcli.jsonio import dumps
-    from wtcli.segment.batch import (FOUND, batch_report, find_images, segment_paths,
-                                     write_batch_files)
+    from wtcli.segment.batch import (FOUND, batch_report, find_images, not_read_text,
+                                     photos_not_read, segment_paths, write_batch_files)
     from wtcli.segment.infer import load_model, segment_image
     from wtcli.segment.model import resolve_weights
     from wtcli.segment.refine import load_refiner, resolve_refiner
@@ -72,6 +72,10 @@ def segment(
     for folder in (out, *(out / sub for sub in SUBFOLDERS)):
         writable_folder(folder)
     _, files = find_images(path, recursive, out)  # errors (no such path, empty folder) before loading
+    not_read = photos_not_read(path, recursive, out)
+    if not_read:
+        err_console.print(f"note: {sum(not_read.values())} photo(s) in {path} not read: "
+                          f"{not_read_text(not_read)}", soft_wrap=True)
     weights = resolve_weights(model)
     net = load_model(weights, device, precision, mirror=mirror_model or "auto")
     if refine:
@@ -91,7 +95,7 @@ def segment(
                               on_progress=lambda res: advance(f"{res.rel} {res.status}"),
                               score_threshold=score_threshold, settings=settings)
     results = batch.results
-    report = batch_report(out, results, settings, interrupted=batch.interrupted)
+    report = batch_report(out, results, settings, interrupted=batch.interrupted, not_read=not_read)
     unsaved: OutputError | None = None  # the summary could not be written (the disk filled)
     try:
         write_batch_files(out, results, report)

@@ -46,6 +46,12 @@ from wtcli.masks import (LABELS, Instances, check_declared_size, instances_docum
 from wtcli.segment.defaults import DEFAULT_SCORE_THRESHOLD
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff")
+# Photos a drone's or a phone's folder holds that segment does not read, by kind: said, not
+# silently left out (a DJI drone saves a .DNG beside each .JPG; phones save .HEIC).
+NOT_READ = {**dict.fromkeys((".dng", ".arw", ".cr2", ".cr3", ".nef", ".orf", ".raf", ".rw2",
+                             ".raw"), "raw"),
+            ".heic": "HEIF", ".heif": "HEIF", ".webp": "WebP", ".bmp": "BMP", ".gif": "GIF",
+            ".jp2": "JPEG 2000"}
 REPORT_SCHEMA = "wtinspect.segment_report"
 MAX_DECODE_PIXELS = 1 << 30  # OpenCV's CV_IO_MAX_IMAGE_PIXELS default
 FOUND = ("rotor", "single_blade", "tower_only", "nothing")  # what a photo holds (found_in)
@@ -112,23 +118,63 @@ def find_images(path: Path, recursive: bool = False, out: Path | None = None
     except OSError as e:
         raise InputError(f"{path}: cannot read ({os_reason(e)})") from None
     if path.is_file():
+        if path.suffix.lower() in NOT_READ:
+            raise _not_read_photo(path)
         if path.suffix.lower() not in IMAGE_SUFFIXES:
             raise InputError(f"{path}: not an image (expected {', '.join(IMAGE_SUFFIXES)})")
         return path.parent, [path]
     if not path.is_dir():
         raise InputError(f"{path}: not a file or folder")
+    files = [p for p in _candidates(path, recursive, out) if p.suffix.lower() in IMAGE_SUFFIXES]
+    if not files:
+        hint = "" if recursive else " (add --recursive to look in subfolders)"
+        other = not_read_text(photos_not_read(path, recursive, out))
+        raise InputError(f"{path}: no images ({', '.join(IMAGE_SUFFIXES)}) in this folder{hint}"
+                         + (f"; it holds photos segment does not read: {other}" if other else ""))
+    return path, files
+
+
+def _candidates(path: Path, recursive: bool, out: Path | None) -> list[Path]:
+    """The folder's files (and subfolders' with ``recursive``), sorted, hidden ones left out."""
     try:
         it = _walk(path, out) if recursive else list(path.iterdir())
         # A link whose target is missing or loops is kept, so it fails visibly in the report.
-        files = sorted(p for p in it if (p.is_file() or (p.is_symlink() and not p.exists()))
-                       and p.suffix.lower() in IMAGE_SUFFIXES
-                       and not any(part.startswith(".") for part in p.relative_to(path).parts))
+        return sorted(p for p in it if (p.is_file() or (p.is_symlink() and not p.exists()))
+                      and not any(part.startswith(".") for part in p.relative_to(path).parts))
     except OSError as e:  # no read or no execute (search) permission on the folder
         raise InputError(f"{path}: cannot list the folder ({os_reason(e)})") from None
-    if not files:
-        hint = "" if recursive else " (add --recursive to look in subfolders)"
-        raise InputError(f"{path}: no images ({', '.join(IMAGE_SUFFIXES)}) in this folder{hint}")
-    return path, files
+
+
+def photos_not_read(path: Path, recursive: bool = False, out: Path | None = None) -> dict[str, int]:
+    """How many photos of each suffix (as written, e.g. ".DNG") in the folder ``segment`` does
+    not read (``NOT_READ``); {} for a single file."""
+    if not path.is_dir():
+        return {}
+    counts: dict[str, int] = {}
+    for p in _candidates(path, recursive, out):
+        if p.suffix.lower() in NOT_READ:
+            counts[p.suffix] = counts.get(p.suffix, 0) + 1
+    return counts
+
+
+def not_read_text(counts: dict[str, int]) -> str:
+    """"3 .DNG (raw), 1 .heic (HEIF) — " and what to do; "" for none."""
+    if not counts:
+        return ""
+    kinds = ", ".join(f"{n} {sfx} ({NOT_READ[sfx.lower()]})" for sfx, n in sorted(counts.items()))
+    return f"{kinds} — {not_read_advice(list(counts), sum(counts.values()))}"
+
+
+def not_read_advice(suffixes: list[str], n: int = 1) -> str:
+    them, file = ("them", "each raw file") if n > 1 else ("it", "the raw file")
+    raw = any(NOT_READ.get(sfx.lower()) == "raw" for sfx in suffixes)
+    return ((f"use the JPEG the camera saved beside {file}, or convert {them}" if raw
+             else f"convert {them}") + f" to {', '.join(IMAGE_SUFFIXES)}")
+
+
+def _not_read_photo(path: Path) -> InputError:
+    return InputError(f"{path}: a {NOT_READ[path.suffix.lower()]} photo, which wtinspect does "
+                      f"not read; {not_read_advice([path.suffix])}")
 
 
 def is_output_folder(folder: Path) -> bool:
@@ -191,6 +237,8 @@ def read_image(path: Path) -> np.ndarray:
                              "OpenCV's limit); downscale it first") from None
         raise InputError(f"{path}: not a readable image ({e.__class__.__name__})") from None
     if img is None:
+        if path.suffix.lower() in NOT_READ:
+            raise _not_read_photo(path)
         raise InputError(f"{path}: not a readable image (corrupt or unsupported format)")
     if img.dtype == np.uint16:
         img = (img / 257).astype(np.uint8)
@@ -344,9 +392,10 @@ def _image_record(iid: int, rel: str, src: Path, res: ImageResult) -> dict[str, 
 
 
 def batch_report(out: Path, results: list[ImageResult], settings: dict[str, Any],
-                 interrupted: bool = False) -> dict[str, Any]:
+                 interrupted: bool = False, not_read: dict[str, int] | None = None
+                 ) -> dict[str, Any]:
     """What report.json holds. ``interrupted``: the batch was stopped (Ctrl-C, SIGTERM) before
-    its last photos, which it leaves out."""
+    its last photos, which it leaves out. ``not_read``: ``photos_not_read``'s counts."""
     done = any(r.instances is not None for r in results)
     return document(REPORT_SCHEMA, 1, {
         "settings": settings,
@@ -357,6 +406,7 @@ def batch_report(out: Path, results: list[ImageResult], settings: dict[str, Any]
         "n_found": {k: sum(r.found == k for r in results if r.status != "error") for k in FOUND},
         "instances": str(out / "instances.json") if done else None,
         "interrupted": interrupted,  # added within schema_version 1, as n_found
+        "not_read": dict(sorted((not_read or {}).items())),  # added within schema_version 1
     })
 
 
@@ -373,7 +423,7 @@ def write_batch_files(out: Path, results: list[ImageResult], report: dict[str, A
     write_json(out / "report.json", report)
 
 
-__all__ = ["FOUND", "IMAGE_SUFFIXES", "SUBFOLDERS", "Batch", "ImageResult", "batch_report",
+__all__ = ["FOUND", "IMAGE_SUFFIXES", "NOT_READ", "not_read_text", "photos_not_read", "SUBFOLDERS", "Batch", "ImageResult", "batch_report",
            "found_in", "find_images",
            "is_output_folder", "output_names", "output_paths", "read_image", "segment_paths",
            "write_batch_files", "instances_document"]
