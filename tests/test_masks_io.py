@@ -3,7 +3,7 @@ import pytest
 
 from wtcli.errors import InputError
 from wtcli.masks import (CATEGORIES, Instances, polygons_decode, polygons_encode, read_instances, rle_decode,
-                         rle_encode, write_instances)
+                         rle_encode, write_instances, write_instances_streamed)
 
 
 def test_rle_roundtrip_and_convention():
@@ -41,6 +41,29 @@ def test_instances_file_roundtrip(tmp_path):
     assert (back.masks == m).all()
     assert np.allclose(back.boxes[0], [3, 2, 9, 5])
     assert len(inst[inst.scores > 0.6]) == 1
+
+
+def test_instances_streamed_are_the_same_bytes(tmp_path):
+    """segment's instances.json, written from each photo's annotations as they are read back,
+    is byte for byte what one document of every photo's masks gives: ids renumbered, a photo
+    with nothing found, a batch with nothing at all."""
+    rng = np.random.default_rng(3)
+    images, per = [], []
+    for k, n in enumerate([2, 0, 3, 1]):
+        h, w = 20 + k, 30
+        m = rng.random((n, h, w)) > 0.6
+        per.append(Instances(np.array(["blade", "tower", "nacelle"][:n] + ["blade"] * (n - 3),
+                                      object), m, rng.random(n)) if n else Instances.empty(h, w))
+        images.append({"id": k + 1, "file_name": f"{k}.jpg", "width": w, "height": h})
+    extra = {"settings": {"score_threshold": 0.5, "model": "m.pt"}}
+    for sel in (slice(None), slice(1, 2)):
+        want = write_instances(tmp_path / "one.json", images[sel], per[sel], extra=extra).read_bytes()
+        anns = [p.annotations(1, first_id=1) for p in per[sel]]  # as each photo's own file holds them
+        got = write_instances_streamed(tmp_path / "streamed.json", images[sel], anns, extra=extra)
+        assert got.read_bytes() == want
+    with pytest.raises(ValueError):  # an image without its annotations is a caller's bug
+        write_instances_streamed(tmp_path / "short.json", images, anns)
+    assert not list(tmp_path.glob(".short.json*")) and not (tmp_path / "short.json").exists()
 
 
 def test_bad_instances_files_are_clear(tmp_path):

@@ -14,7 +14,7 @@ import re
 import reprlib
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterable
 
 import numpy as np
 
@@ -125,8 +125,9 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
     return atomic_write_bytes(path, (text if text.endswith("\n") else text + "\n").encode("utf-8"))
 
 
-def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
-    """Write ``data`` to a temporary ``.NAME.k2x9q0ab`` (8 random characters) beside ``path``
+def atomic_write_bytes(path: str | Path, data: bytes | Iterable[bytes]) -> Path:
+    """Write ``data`` (bytes, or pieces of them made as they are written: a file larger than
+    memory should hold) to a temporary ``.NAME.k2x9q0ab`` (8 random characters) beside ``path``
     (``temp_prefix``: a long NAME is cut to fit), then rename it over ``path``: readers see the
     old file or the new one, never half of one. Any OSError (a file in the way, a read-only folder, a full disk)
     becomes OutputError naming ``path``; the temporary file is removed
@@ -150,7 +151,8 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     try:
         os.fchmod(fd, _FILE_MODE)
         with os.fdopen(fd, "wb") as f:
-            f.write(data)
+            for piece in (data,) if isinstance(data, (bytes, bytearray, memoryview)) else data:
+                f.write(piece)
         os.replace(tmp, path)
     except BaseException as e:
         Path(tmp).unlink(missing_ok=True)

@@ -8,16 +8,19 @@ starting with a background run) or polygons ``[[x1, y1, x2, y2, ...], ...]`` (fo
 
 from __future__ import annotations
 
+import json
 import math
+import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterable
 
 import cv2
 import numpy as np
 
 from wtcli.errors import InputError
-from wtcli.jsonio import document, number, read_json, shown, write_json
+from wtcli.jsonio import (atomic_write_bytes, document, dumps, number, read_json, shown,
+                          write_json)
 
 LABELS = ("blade", "tower", "nacelle")
 CATEGORIES = [{"id": i + 1, "name": n, "supercategory": "wind_turbine"} for i, n in enumerate(LABELS)]
@@ -451,6 +454,34 @@ def instances_document(images: list[dict], per_image: list[Instances], encoding:
 def write_instances(path: str | Path, images: list[dict], per_image: list[Instances],
                     encoding: str = "rle", extra: dict | None = None) -> Path:
     return write_json(path, instances_document(images, per_image, encoding, extra))
+
+
+_ANNOTATIONS_HERE = "@@annotations@@"
+
+
+def write_instances_streamed(path: str | Path, images: list[dict],
+                             annotations: Iterable[list[dict]], extra: dict | None = None) -> Path:
+    """``write_instances``, byte for byte, from each image's annotations as they come (e.g. read
+    back from a file per image), renumbered: one image's masks in memory at a time, where
+    ``instances_document`` holds every image's (a thousand 20 MP photos: tens of GB).
+    ``annotations``: per image of ``images``, in order, its COCO annotations (their ``id`` and
+    ``image_id`` are replaced)."""
+    body = {"info": {"description": "wtinspect instances"}, "licenses": [], "images": images,
+            "annotations": _ANNOTATIONS_HERE, "categories": CATEGORIES, **(extra or {})}
+    head, tail = dumps(document(INSTANCES_SCHEMA, INSTANCES_VERSION, body)).split(
+        json.dumps(_ANNOTATIONS_HERE), 1)
+
+    def pieces():
+        yield head.encode("utf-8")
+        n = 0
+        for img, anns in zip(images, annotations, strict=True):
+            for a in anns:
+                n += 1
+                text = dumps({**a, "id": n, "image_id": int(img["id"])})
+                yield (("[\n" if n == 1 else ",\n") + textwrap.indent(text, "  ")).encode("utf-8")
+        yield (("\n ]" if n else "[]") + tail + "\n").encode("utf-8")
+
+    return atomic_write_bytes(path, pieces())
 
 
 def read_coco_document(path: str | Path) -> dict:

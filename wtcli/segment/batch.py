@@ -39,10 +39,12 @@ import cv2
 import numpy as np
 
 from wtcli.errors import ConfigError, InputError, OutputError, WtError
-from wtcli.jsonio import atomic_write_bytes, document, missing, os_reason, write_json
+from wtcli.jsonio import (atomic_write_bytes, document, missing, os_reason, read_json,
+                          write_json)
 from wtcli.outputs import remove_stale, remove_temp_files
-from wtcli.masks import (LABELS, Instances, check_declared_size, instances_document, read_instances,
-                         write_instances)
+from wtcli.masks import (INSTANCES_SCHEMA, INSTANCES_VERSION, LABELS, Instances,
+                         check_declared_size, instances_document, read_instances, write_instances,
+                         write_instances_streamed)
 from wtcli.segment.defaults import DEFAULT_SCORE_THRESHOLD
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff")
@@ -85,7 +87,9 @@ class ImageResult:
     found: str | None = None  # one of FOUND; None for an error
     width: int = 0
     height: int = 0
-    instances: Instances | None = None
+    # Its instances are in its instances/NAME.json (instances.json is made from those files at
+    # the end: holding every photo's full-size masks took ~70 MB a 12 MP photo).
+    done: bool = False
     name: str = ""  # the outputs' NAME (output_names); "" -> rel without its suffix
     sha256: str | None = None  # of the photo's bytes: --resume tells this photo from another
 
@@ -289,12 +293,12 @@ def segment_paths(path: Path, out: Path, segment: Callable[[np.ndarray], Instanc
                 done = _finished(outs, rel, digest, settings) if resume else None
                 if done is not None:
                     img_rec, inst = done
-                    res.status, res.instances, res.sha256 = "skipped", inst, digest
+                    res.status, res.sha256 = "skipped", digest
                     res.width, res.height = int(img_rec["width"]), int(img_rec["height"])
                 else:
                     img = read_image(f)
                     inst = segment(img)
-                    res.instances, res.sha256 = inst, digest
+                    res.sha256 = digest
                     res.height, res.width = img.shape[:2]
                     from wtcli.segment.infer import overlay, remove_background
 
@@ -305,10 +309,11 @@ def segment_paths(path: Path, out: Path, segment: Callable[[np.ndarray], Instanc
                     # The instances file last: its presence marks the image as done for --resume.
                     write_instances(outs["instances"], [_image_record(1, rel, f, res)], [inst],
                                     extra={"settings": settings} if settings is not None else None)
-                res.counts = counts_of(res.instances)
-                res.found = found_in(res.instances, score_threshold)
+                res.counts = counts_of(inst)
+                res.found = found_in(inst, score_threshold)
+                res.done = True
             except OutputError as e:
-                res.status, res.error, res.instances = "error", str(e), None
+                res.status, res.error = "error", str(e)
                 # A name too long for the disk is this photo's alone; anything else (a full
                 # disk, a read-only folder) would fail the next photo too, after the network.
                 if e.errno != errno.ENAMETOOLONG:
@@ -316,12 +321,12 @@ def segment_paths(path: Path, out: Path, segment: Callable[[np.ndarray], Instanc
             except ConfigError:
                 raise
             except WtError as e:
-                res.status, res.error, res.instances = "error", _naming(str(e), f), None
+                res.status, res.error = "error", _naming(str(e), f)
             except OSError as e:
-                res.status, res.instances = "error", None
+                res.status = "error"
                 res.error = f"{e.filename or f}: {os_reason(e)}"
             except (ValueError, cv2.error, MemoryError) as e:
-                res.status, res.instances = "error", None
+                res.status = "error"
                 res.error = _naming(f"{e.__class__.__name__}: {e}", f)
             batch.results.append(res)
             if on_progress:
@@ -363,8 +368,6 @@ def _finished(outs: dict[str, Path], rel: str, digest: str | None,
     if rec.get("file_name") != rel or (rec.get("sha256") is not None and rec["sha256"] != digest):
         return None
     if settings is not None:
-        from wtcli.jsonio import read_json
-
         try:
             before = read_json(outs["instances"], header_required=False).get("settings")
         except InputError:
@@ -396,7 +399,7 @@ def batch_report(out: Path, results: list[ImageResult], settings: dict[str, Any]
                  ) -> dict[str, Any]:
     """What report.json holds. ``interrupted``: the batch was stopped (Ctrl-C, SIGTERM) before
     its last photos, which it leaves out. ``not_read``: ``photos_not_read``'s counts."""
-    done = any(r.instances is not None for r in results)
+    done = any(r.done for r in results)
     return document(REPORT_SCHEMA, 1, {
         "settings": settings,
         "images": [r.to_dict(out) for r in results],
@@ -410,17 +413,37 @@ def batch_report(out: Path, results: list[ImageResult], settings: dict[str, Any]
     })
 
 
+def _annotations(out: Path, res: ImageResult, combined: Path) -> list[dict]:
+    path = output_paths(out, res.rel, res.name)["instances"]
+    try:
+        anns = read_json(path, INSTANCES_SCHEMA, INSTANCES_VERSION)["annotations"]
+        if not isinstance(anns, list):
+            raise InputError(f"{path}: annotations is not a list")
+    except (InputError, KeyError) as e:  # changed or removed while the batch ran
+        raise InputError(f"{combined}: not written: {res.rel}'s instances file could not be read "
+                         f"back ({e})") from None
+    return anns
+
+
 def write_batch_files(out: Path, results: list[ImageResult], report: dict[str, Any]) -> None:
-    """The combined instances.json (finished images) and ``report`` (``batch_report``) as
-    report.json."""
-    done = [r for r in results if r.instances is not None]
+    """The combined instances.json (finished images, their annotations read back from their
+    instances/NAME.json one at a time) and ``report`` (``batch_report``) as report.json."""
+    done = [r for r in results if r.done]
     images = [_image_record(k + 1, r.rel, Path(r.source), r) for k, r in enumerate(done)]
+    lost = None  # a photo's file changed or removed while the batch ran: the report still goes out
     if done:
-        write_instances(out / "instances.json", images, [r.instances for r in done],
-                        extra={"settings": report["settings"]})
+        combined = out / "instances.json"
+        try:
+            write_instances_streamed(combined, images,
+                                     (_annotations(out, r, combined) for r in done),
+                                     extra={"settings": report["settings"]})
+        except InputError as e:
+            lost = e
     else:
         remove_stale(out / "instances.json")  # it would hold an earlier run's images
     write_json(out / "report.json", report)
+    if lost is not None:
+        raise lost
 
 
 __all__ = ["FOUND", "IMAGE_SUFFIXES", "NOT_READ", "not_read_text", "photos_not_read", "SUBFOLDERS", "Batch", "ImageResult", "batch_report",
