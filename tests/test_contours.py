@@ -223,3 +223,40 @@ def test_cli_mask_pngs(cli, tmp_path):
     img, = json.loads(r.stdout)["images"]
     assert [i["label"] for i in img["instances"]] == ["blade", "tower", "nacelle"]
     assert img["image_size"] == [60, 80] and img["dropped"] == 1
+
+
+def _many_images(path, n, size=1000):
+    """An instances file of ``n`` images, six full-height bars each (6 MB of masks an image)."""
+    per, images = [], []
+    for i in range(n):
+        m = np.zeros((6, size, size), bool)
+        for k in range(6):
+            m[k, 10:size - 10, 100 * k + 20:100 * k + 60] = True
+        per.append(Instances(np.array(["blade"] * 6, object), m, np.full(6, 0.9)))
+        images.append({"id": i + 1, "file_name": f"{i}.jpg", "width": size, "height": size})
+    write_instances(path, images, per)
+    return path
+
+
+@pytest.mark.parametrize("stage", ["contours", "pitch"])
+def test_a_large_instances_file_is_read_one_image_at_a_time(tmp_path, stage):
+    """segment's instances.json of a whole folder: contours and pitch draw one image's masks at
+    a time (all of them at once took 3 GB for forty 12 MP photos)."""
+    import tracemalloc
+
+    from wtcli.contours import contours_batch
+    from wtcli.pitch.inputs import load_pitch_input
+
+    peaks = {}
+    for n in (2, 8):
+        path = _many_images(tmp_path / f"i{n}.json", n)
+        tracemalloc.start()
+        if stage == "contours":
+            got = contours_batch([path])
+            assert len(got.sets) == n and got.n_failed == 0
+        else:
+            got = load_pitch_input([path])
+            assert len(got) == n
+        peaks[n] = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+    assert peaks[8] - peaks[2] < 9e6, peaks  # six more images' masks would be 36 MB

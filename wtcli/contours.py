@@ -19,7 +19,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, Sized
 
 import cv2
 import numpy as np
@@ -27,8 +27,8 @@ import numpy as np
 from wtcli.console import StageProgress, stage_ticker
 from wtcli.errors import InputError, PerceptionError
 from wtcli.jsonio import document, read_json, shown
-from wtcli.masks import (LABELS, Instances, check_declared_size, check_pixels, check_size,
-                         read_instances)
+from wtcli.masks import (LABELS, Instances, InstancesFile, check_declared_size, check_pixels,
+                         check_size)
 
 CONTOURS_SCHEMA = "wtinspect.contours"
 CONTOURS_VERSION = 1
@@ -317,20 +317,20 @@ def is_mask_file(path: Path) -> bool:
     return path.suffix.lower() in MASK_SUFFIXES
 
 
-def load_instances(paths: list[Path]) -> list[tuple[dict, Instances, str]]:
+def load_instances(paths: list[Path]) -> tuple[str, Sized]:
     """INPUT of ``contours``: one instances JSON (every image in it) or mask PNGs of one image.
-    Returns (image record, instances, source) per image."""
+    Returns (source, images): ``len(images)`` images, iterated as (image record, instances),
+    an instances file's masks drawn one image at a time (``InstancesFile``)."""
     paths = [Path(p) for p in paths]
     if not paths:
         raise InputError("no input given")
     if len(paths) == 1 and paths[0].suffix.lower() == ".json":
-        doc_images = read_instances(paths[0])
-        if not doc_images:
+        doc_images = InstancesFile(paths[0])
+        if not len(doc_images):
             raise InputError(f"{paths[0]}: no images in the instances file")
-        return [(img, inst, str(paths[0])) for img, inst in doc_images]
+        return str(paths[0]), doc_images
     if all(is_mask_file(p) for p in paths):
-        rec, inst = instances_from_mask_files(paths)
-        return [(rec, inst, str(paths[0]))]
+        return str(paths[0]), [instances_from_mask_files(paths)]
     bad = next(p for p in paths if not is_mask_file(p))
     raise InputError(f"{bad}: expected an instances JSON or mask PNG files "
                      f"(one JSON, or {', '.join(MASK_SUFFIXES)} masks)")
@@ -367,10 +367,10 @@ def contours_batch(paths: list[Path], area_threshold: float = DEFAULT_AREA_THRES
                    progress: StageProgress | None = None) -> ContoursBatch:
     """``find_contours`` on every image of the input; an image where nothing survives the
     filter is recorded as failed, the others go on. ``progress``: stage "images", per image."""
-    loaded = load_instances(paths)
+    source, loaded = load_instances(paths)
     sets, errors, images = [], [], []
     tick = stage_ticker(progress, "images", len(loaded))
-    for img, inst, source in loaded:
+    for img, inst in loaded:
         cs = find_contours(inst, area_threshold, image=img, source=source)
         try:
             sets.append(require_contours(cs))
@@ -380,7 +380,7 @@ def contours_batch(paths: list[Path], area_threshold: float = DEFAULT_AREA_THRES
             errors.append(str(e))
         images.append(img)
         tick()
-    return ContoursBatch(tuple(sets), tuple(errors), tuple(images), loaded[0][2], area_threshold)
+    return ContoursBatch(tuple(sets), tuple(errors), tuple(images), source, area_threshold)
 
 
 def _check_numbers(d: dict[str, Any]) -> None:

@@ -539,11 +539,28 @@ def coco_images(path: str | Path, doc: dict) -> list[tuple[dict, int, int, list[
 def read_instances(path: str | Path) -> list[tuple[dict, Instances]]:
     """Read a COCO instances file (ours, or any COCO-compatible one with our category names
     and ids), every mask drawn."""
-    path = Path(path)
-    doc = read_coco_document(path)
-    cats = {c.get("id"): c.get("name") for c in doc["categories"]}
-    if any(cats.get(i + 1) != n for i, n in enumerate(LABELS)):
-        raise InputError(f"{path}: categories must be {[c['name'] for c in CATEGORIES]} with ids 1..3, "
-                         f"got {shown(list(cats.items()))}")
-    return [(img, Instances.from_annotations(anns, h, w, where=f"{path}: image {shown(img['id'])} "))
-            for img, h, w, anns in coco_images(path, doc)]
+    return list(InstancesFile(path))
+
+
+class InstancesFile:
+    """A COCO instances file read and checked up front (sizes, ids, categories), each image's
+    masks drawn only as it is reached, one image at a time: a file of a thousand 20 MP photos
+    holds their runs (about 1 GB as Python numbers), never all their full-size masks (tens of
+    GB). ``len()`` counts the images; iterating gives (image record, Instances); a bad
+    annotation is InputError naming the image when its image is reached."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        doc = read_coco_document(self.path)
+        cats = {c.get("id"): c.get("name") for c in doc["categories"]}
+        if any(cats.get(i + 1) != n for i, n in enumerate(LABELS)):
+            raise InputError(f"{self.path}: categories must be {[c['name'] for c in CATEGORIES]} "
+                             f"with ids 1..3, got {shown(list(cats.items()))}")
+        self.items = coco_images(self.path, doc)
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def __iter__(self):
+        for img, h, w, anns in self.items:
+            yield img, Instances.from_annotations(anns, h, w, where=f"{self.path}: image {shown(img['id'])} ")

@@ -18,7 +18,7 @@ from wtcli.contours import (CONTOURS_SCHEMA, DEFAULT_AREA_THRESHOLD, MASK_SUFFIX
                             read_contours, require_contours)
 from wtcli.errors import ConfigError, InputError, PerceptionError
 from wtcli.jsonio import document, read_json
-from wtcli.masks import read_instances
+from wtcli.masks import InstancesFile
 from wtcli.pitch.angles import CLASS_INTERVALS
 from wtcli.pitch.measure import measure_pitch
 from wtcli.pitch.result import PITCH_SCHEMA, PITCH_VERSION, THETA_SOURCE, PitchResult
@@ -71,7 +71,7 @@ def load_pitch_input(paths: list[Path], area_threshold: float | None = None) -> 
         if isinstance(doc, dict) and doc.get("schema") == CONTOURS_SCHEMA:
             return _from_contours_file(first, area_threshold)
         out = []
-        for img, inst in read_instances(first):
+        for img, inst in InstancesFile(first):  # one image's masks at a time
             cands = _image_candidates(img, first.parent)
             try:
                 cs = require_contours(find_contours(inst, thr, image=img, source=str(first)))
