@@ -455,6 +455,14 @@ def test_real_dataset_reads_a_photo_folder_and_holds_out_sequences(tmp_path):
     # The nacelle the split tells apart is not taught from a photo: an ignore box instead.
     assert x.shape == (3, 240, 320) and sorted(t["labels"].tolist()) == [1, 1, 1, 2]
     assert t["ignore_boxes"].shape == (1, 4)
+    # A photo's split is kept as run lengths, not drawn masks (a user's thousands of 12 MP
+    # photos: tens of GB), and reads back the same.
+    again = ds.load(1)
+    assert (again.instances.masks == s.instances.masks).all()
+    assert (again.ignore == s.ignore).all() if s.ignore is not None else again.ignore is None
+    labels, shapes, size, unknown = ds._cache[ds.keep[1]]
+    assert all(isinstance(m.runs, np.ndarray) for m in shapes)
+    assert sum(m.runs.nbytes for m in shapes) < s.instances.masks.size / 8 / 4  # < 1/4 of packed bits
     # A sequence column names the flights; holding one out leaves the others.
     rows = list(csv.reader((root / "manifest.csv").open()))
     rows[0].append("sequence")

@@ -39,15 +39,17 @@ MAX_IMAGE_PIXELS = 200_000_000
 
 def rle_encode(mask: np.ndarray) -> dict[str, Any]:
     """Uncompressed COCO RLE of a bool mask [H, W]."""
+    return {"counts": _runs(mask).tolist(), "size": [int(mask.shape[0]), int(mask.shape[1])]}
+
+
+def _runs(mask: np.ndarray) -> np.ndarray:
+    """A bool mask's uncompressed RLE run lengths (column-major, background first), int64."""
     flat = np.asarray(mask, dtype=bool).flatten(order="F")
     if flat.size == 0:
-        return {"counts": [], "size": list(mask.shape)}
+        return np.zeros(0, np.int64)
     change = np.flatnonzero(flat[1:] != flat[:-1]) + 1
-    bounds = np.concatenate([[0], change, [flat.size]])
-    counts = np.diff(bounds).tolist()
-    if flat[0]:
-        counts = [0] + counts
-    return {"counts": counts, "size": [int(mask.shape[0]), int(mask.shape[1])]}
+    counts = np.diff(np.concatenate([[0], change, [flat.size]]))
+    return np.concatenate([[0], counts]) if flat[0] else counts
 
 
 def _rle_counts(rle: dict[str, Any]) -> tuple[int, int, np.ndarray]:
@@ -134,6 +136,13 @@ class Shape:
     width: int
     runs: np.ndarray | None = None  # uncompressed RLE run lengths, int32, background first
     polygons: tuple[np.ndarray, ...] = ()  # int32 (n, 2) points in 1/16 px
+
+    @classmethod
+    def of_mask(cls, mask: np.ndarray) -> Shape:
+        """A drawn mask [H, W] kept as its run lengths (a blade in a 12 MP photo: ~30 kB
+        against 12 MB drawn, 1.5 MB as packed bits)."""
+        h, w = mask.shape
+        return cls(int(h), int(w), runs=_runs(mask).astype(np.int32))
 
     def mask(self) -> np.ndarray:
         """bool [H, W]."""
