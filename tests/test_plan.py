@@ -660,6 +660,14 @@ def test_cli_a_users_geojson_under_the_maps_name_is_refused_before_planning(cli,
     assert sorted(p.name for p in exp.iterdir()) == ["plan.geojson"]
 
 
+def test_cli_export_names_over_the_limit_are_refused_before_planning(cli, tmp_path):
+    out = tmp_path / ("p" * 240 + ".json")
+    r = cli("plan", SAMPLE, "--out", out, "--export-dir", tmp_path / "exp")
+    assert r.exit_code == 3, r.output
+    assert "_UAV1_s999.waypoints: the export's file names would be over the 255-byte limit" in r.stderr
+    assert "blade azimuths" not in r.stderr and not out.exists()
+
+
 def test_cli_json_is_one_document(cli):
     r = cli("plan", SAMPLE, "--json")
     assert r.exit_code == 0

@@ -128,7 +128,8 @@ def register(app: typer.Typer) -> None:
                                   "site.origin (lat, lon, alt) in it")
             stem = out.stem if out else "mission"  # the exports' names
             if export_dir is not None:  # a user's own STEM.geojson: refused before planning
-                from wtcli.plan.exports import check_map_is_ours
+                from wtcli.plan.exports import check_export_names, check_map_is_ours
+                check_export_names(export_dir, stem, mission.fleet.uavs)
                 check_map_is_ours(export_dir, stem)
             azimuths, sources = blade_azimuths(mission, list(inputs or []), _pose(camera_pose), fast=fast)
             for tid, src in sources.items():

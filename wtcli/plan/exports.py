@@ -343,6 +343,19 @@ MAP_KINDS = ("turbine", "route", "photos")  # the features' properties.kind in S
 MAX_MAP_BYTES = 512 * 2 ** 20
 
 
+def check_export_names(out_dir: str | Path, stem: str, uavs: tuple[str, ...]) -> None:
+    """OutputError (exit 3) before planning when a sortie file's name, ``STEM_UAV_sN.waypoints``
+    with N up to 999, would pass the 255-byte limit on a file name (a long ``--out`` name)."""
+    from wtcli.jsonio import NAME_MAX
+
+    for uav in uavs:
+        name = f"{stem}_{uav}_s999.waypoints"
+        if len(os.fsencode(name)) > NAME_MAX:
+            raise OutputError(f"{Path(out_dir) / name}: the export's file names would be over the "
+                              f"{NAME_MAX}-byte limit of a file name; give --out a shorter name "
+                              "(the exports are named after it)")
+
+
 def check_map_is_ours(out_dir: str | Path, stem: str) -> None:
     """OutputError (exit 3) when ``STEM.geojson`` in ``out_dir`` is not the map of an earlier
     export (a user's own GeoJSON under that name: a site boundary, a survey), which the export
