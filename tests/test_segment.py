@@ -1097,6 +1097,26 @@ def test_a_photos_instances_file_gone_before_the_end_is_said(tmp_path, monkeypat
     assert not (out / "instances.json").exists() and not list(out.glob(".instances.json*"))
 
 
+def test_a_large_batch_says_where_every_photo_is(cli, random_weights, tmp_path, monkeypatch):
+    """Over 40 photos the summary lists the failed ones only; with none failed it prints no
+    empty table but where every photo's row is."""
+    _fake_segment(monkeypatch)
+    folder = tmp_path / "p"
+    folder.mkdir()
+    for i in range(41):
+        cv2.imwrite(str(folder / f"{i:02d}.png"), _image(seed=i))
+    out = tmp_path / "seg"
+    res = cli("segment", folder, "--out", out, "--model", random_weights, "--no-refine")
+    assert res.exit_code == 0, res.stderr[-800:]
+    assert f"41 photos: every photo in {out / 'report.json'}" in res.stderr
+    assert "┃ file" not in res.stderr and "| file" not in res.stderr
+    (folder / "07.png").write_bytes(b"not a photo")
+    res = cli("segment", folder, "--out", out, "--model", random_weights, "--no-refine")
+    assert res.exit_code == ExitCode.PARTIAL
+    said = " ".join(res.stderr.split())  # the table's caption is folded to the terminal's width
+    assert "41 photos: the failed shown, every photo in" in said and "07.png" in said
+
+
 def test_output_names_keep_apart_photos_that_would_share_one():
     names = batch.output_names(["dup.jpg", "dup.png", "a.jpg", "s/x.jpg", "t/x.jpg",
                                 "IMG_1.jpg", "IMG_1.JPG", "b.JPG"])

@@ -126,17 +126,25 @@ def count_bar(description: str, total: int) -> Iterator[Callable[..., None]]:
             yield lambda status="": bar.update(task, advance=1, status=status)
         return
     t0, done, every = time.monotonic(), 0, max(1, math.ceil(total / 10))
+    last = t0
 
     def advance(status: str = "") -> None:
-        nonlocal done
+        nonlocal done, last
         done += 1
-        if total > 1 and (done % every == 0 or done == total):
-            took = time.monotonic() - t0
+        now = time.monotonic()
+        # Every tenth, and at least every LOG_EVERY_S: a tenth of 5 000 photos is half an hour.
+        if total > 1 and (done % every == 0 or done == total or now - last >= LOG_EVERY_S):
+            took, last = now - t0, now
             err_console.print(f"{description}: {done}/{total} ({100 * done / total:.0f} %), "
                               f"{took:.0f} s, {took / done:.2f} s each"
                               + (f", last: {status}" if status else ""), soft_wrap=True)
 
     yield advance
+
+
+LOG_EVERY_S = 60.0  # in a log, a progress line at least this often while items finish
+LOG_QUIET_S = 10.0  # in a log, a staged computation says nothing until it has run this long
+LOG_GAP_S = 5.0  # ... and then at most a line this often
 
 
 # A long computation in stages reports ``progress(stage, done, total)``: once with done 0 when a
@@ -160,14 +168,40 @@ def stage_ticker(progress: StageProgress | None, stage: str, total: int) -> Call
     return tick
 
 
+def _stage_lines(texts: dict[str, str], name: str) -> StageProgress:
+    """``stage_bars`` in a log (a batch server, ``nohup``), where a bar shows nothing: once the
+    computation has run LOG_QUIET_S (a short one says nothing, as on a terminal its bars
+    vanish), a line when a stage passes a tenth or ends, at most one every LOG_GAP_S, and at
+    least one every LOG_EVERY_S / 2 while jobs finish."""
+    t0 = time.monotonic()
+    starts: dict[str, float] = {}
+    last = [t0]  # the time of the last line, of any stage
+
+    def progress(stage: str, done: int, total: int) -> None:
+        now = time.monotonic()
+        start = starts.setdefault(stage, now)
+        if done == 0 or now - t0 < LOG_QUIET_S:
+            return
+        every = max(1, math.ceil(total / 10))
+        mark = done % every == 0 or done == total
+        if (mark and now - last[0] >= LOG_GAP_S) or now - last[0] >= LOG_EVERY_S / 2:
+            last[0] = now
+            what = texts.get(stage, stage)
+            err_console.print(f"{name}: {'' if what == name else what + ': '}{done}/{total} "
+                              f"({100 * done / max(total, 1):.0f} %), {now - start:.0f} s",
+                              soft_wrap=True)
+
+    return progress
+
+
 @contextmanager
-def stage_bars(texts: dict[str, str]) -> Iterator[StageProgress]:
+def stage_bars(texts: dict[str, str], name: str = "wtinspect") -> Iterator[StageProgress]:
     """A transient progress bar per stage on stderr; yields the ``progress`` callback to pass
-    on. ``texts``: what each stage is called on screen (else its name). Only on a terminal:
-    in a log (stderr redirected) a bar that vanishes leaves just a blank line before the
-    result or the one-line error."""
+    on. ``texts``: what each stage is called on screen (else its name). In a log (stderr
+    redirected), lines instead once the work has run a while (``_stage_lines``), each starting
+    with ``name`` (the command)."""
     if not err_console.is_terminal:
-        yield lambda stage, done, total: None
+        yield _stage_lines(texts, name)
         return
     with make_progress(transient=True) as bar:
         tasks: dict[str, int] = {}

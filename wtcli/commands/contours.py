@@ -30,7 +30,7 @@ def register(app: typer.Typer) -> None:
         """Binarise instance masks, find their contours and drop small ones (eq. 4-6)."""
         check_not_inputs([("--out", out)], [("an input file", p) for p in inputs])
         check_outputs(files=[out])
-        with stage_bars({"images": "contours"}) as progress:
+        with stage_bars({"images": "contours"}, "contours") as progress:
             batch = contours_batch(inputs, area_threshold, progress)
         doc = batch.to_document()
         if out is not None:

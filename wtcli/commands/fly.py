@@ -124,7 +124,7 @@ def register(app: typer.Typer) -> None:
         if paper:
             from wtcli.fly.run import mean_changes, paper_table
 
-            with stage_bars({"scenarios": "the paper's scenarios, planned and flown"}) as progress:
+            with stage_bars({"scenarios": "the paper's scenarios, planned and flown"}, "fly") as progress:
                 rows = paper_table(seed=seed, progress=progress)
             means = mean_changes(rows)
             body = {"rows": [r.to_dict() for r in rows], "mean_change": means}
@@ -133,7 +133,7 @@ def register(app: typer.Typer) -> None:
                 from wtcli.fly.run import sensitivity
 
                 s2 = next((r for r in rows if r.name == "paper-s2"), rows[0])
-                with stage_bars({"sensitivity": f"sensitivity of the deviation ({s2.name})"}) as pr:
+                with stage_bars({"sensitivity": f"sensitivity of the deviation ({s2.name})"}, "fly") as pr:
                     body["sensitivity"] = sensitivity(s2.plan, s2.scenario, progress=pr)
                 path = write_sensitivity(body["sensitivity"], pictures,
                                          f"{s2.name}: automated flight's deviation, one thing "
@@ -155,7 +155,7 @@ def register(app: typer.Typer) -> None:
         scn = load_scenario(resolve_scenario(scenario))
         if seed is not None:
             scn = scn.with_seed(seed)
-        with stage_bars(_fly_stage_text()) as progress:
+        with stage_bars(_fly_stage_text(), "fly") as progress:
             report = run_scenario(scn, plan, baselines=baselines, progress=progress)
         doc = document(FLIGHT_SCHEMA, FLIGHT_VERSION, report.to_dict())
         if out is not None:

@@ -136,7 +136,7 @@ def register(app: typer.Typer) -> None:
                 err_console.print(f"{tid}: blade azimuths "
                                   f"{', '.join(f'{a:.1f}' for a in azimuths[tid])} deg from {src}",
                                   soft_wrap=True)
-            with stage_bars(PLAN_STAGE_TEXT) as progress:
+            with stage_bars(PLAN_STAGE_TEXT, "plan") as progress:
                 result = plan_mission(mission, azimuths=azimuths or None, pattern=pattern, workers=jobs,
                                       progress=progress)
             write_out = (lambda: write_plan(out, result)) if out is not None else None

@@ -112,13 +112,20 @@ def segment(
                   caption="found: " + ", ".join(f"{found[k]} {k.replace('_', ' ')}" for k in FOUND))
     for col in ("file", "status", "found", "blades", "towers", "nacelles", "note"):
         table.add_column(col)
+    # A large batch lists its failed photos only (40 at most); every photo is in report.json.
     shown = results if len(results) <= 40 else [r for r in results if r.status == "error"][:40]
     for r in shown:
         c = r.counts
         table.add_row(r.rel, r.status, (r.found or "").replace("_", " "),
                       str(c.get("blade", "")), str(c.get("tower", "")), str(c.get("nacelle", "")),
                       (r.error or "")[:80], style="red" if r.status == "error" else None)
-    err_console.print(table)
+    if len(shown) < len(results):
+        table.caption += (f"\n{len(results)} photos: {'the failed shown, ' if shown else ''}"
+                          f"every photo in {out / 'report.json'}")
+    if shown:
+        err_console.print(table)
+    else:
+        err_console.print(f"segment -> {out}/\n{table.caption}", soft_wrap=True)
     for r in results:  # whole, one line each: the table cuts them, and a log wraps its cells
         if r.status == "error":
             err_console.print(f"failed: {r.error}", soft_wrap=True)
