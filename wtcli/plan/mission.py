@@ -762,7 +762,11 @@ def _tour(job: tuple) -> tuple[list[Chunk], dict, list[float]]:
     links = dict(_link((site, a.end, b.start, pp.leg_required, s.min_altitude_m))
                  for a, b in zip(chunks, chunks[1:]))
     sp = speeds(job[3], pp)
-    return chunks, links, [chunk_time(c, sp) for c in chunks]
+    times = [chunk_time(c, sp) for c in chunks]
+    # The turbine's memos (its coverage cells, ~16 MB) are done with: kept, a site's worth
+    # filled the memory (100 turbines 2.9 GB in one process). What needs them again makes them.
+    job[0]._cache.clear()
+    return chunks, links, times
 
 
 def _chunks(job: tuple) -> list[Chunk]:
@@ -894,7 +898,9 @@ def _photos_by_turbine(ids: list[str], routes: list[Route]) -> dict[str, tuple[n
 def _side_coverage(job: tuple) -> tuple[dict, float, float]:
     t, (pos, rot), camera, gsd, spacing, incidence = job
     cov = turbine_coverage(t, camera, pos, rot, gsd, spacing, incidence)
-    return cov.by_blade_side(), cov.blade_average(), cov.structure_fraction()
+    out = cov.by_blade_side(), cov.blade_average(), cov.structure_fraction()
+    t._cache.clear()  # as in _tour: one turbine's memos held at a time
+    return out
 
 
 def _map(fn, jobs: list, workers: int | None, tick: Callable[[], None] = lambda: None) -> list:
