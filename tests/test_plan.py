@@ -767,6 +767,19 @@ def test_worker_processes_give_the_same_plan():
                 if isinstance(k, tuple) and k and k[0] == "coverage_cells"]
 
 
+def test_every_turbine_short_of_coverage_is_named_at_once():
+    """A site is planned once: the refusal names the first turbine short of min_side_coverage
+    with its why, and every other one short, not one per run of the whole site."""
+    ts = tuple(make_turbine(az=25 * i, yaw=40 * i, tid=f"T{i + 1}", base=(250.0 * i, 0, 0))
+               for i in range(3))
+    m = Mission(ts, CAM, settings=Settings(inspect_tower=False, min_side_coverage=0.9999))
+    with pytest.raises(PlanError) as e:
+        plan_mission(m, workers=1)
+    said = str(e.value)
+    assert said.startswith("turbine T1 blade") and "< min_side_coverage 99.99%" in said
+    assert said.endswith("(2 more turbine(s) short too: T2, T3)")
+
+
 def test_photo_azimuths_not_spread_like_a_rotor_are_refused():
     """A merged or missed blade must never become a plan around blades that are not there."""
     from wtcli.errors import PerceptionError

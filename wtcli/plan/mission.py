@@ -1068,6 +1068,7 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
     sides_all = _map(_side_coverage, [(t, photos[t.id], mission.camera, gsd_eval,
                                        s.coverage_spacing_m, s.max_incidence_deg) for t in real],
                      workers, stage_ticker(progress, "coverage", len(real)))
+    short: list[tuple[str, str]] = []  # (turbine id, why) of every turbine refused, in order
     for t, (sides, average, structure) in zip(real, sides_all):
         vals = [v for d in sides.values() for v in d.values()]
         coverage[t.id] = {"by_blade_side": sides, "blade_average": average,
@@ -1086,10 +1087,15 @@ def plan_mission(mission: Mission, azimuths: dict[str, list[float]] | None = Non
                 why = (f"; {blocked[0]}" if blocked else "") + \
                     f" with {pp.required:g} m clearance (safe distance + tracking margin)"
                 fix = "turn the rotor"
-            raise PlanError(f"turbine {t.id} {worst[0]} {worst[1]}: predicted coverage "
-                            f"{worst[2]:.1%} < min_side_coverage {100 * s.min_side_coverage:.4g}% at "
-                            f"{gsd_eval:.2f} mm/px{why}; {fix}, or lower min_side_coverage to "
-                            "accept it")
+            short.append((t.id, f"turbine {t.id} {worst[0]} {worst[1]}: predicted coverage "
+                          f"{worst[2]:.1%} < min_side_coverage {100 * s.min_side_coverage:.4g}% "
+                          f"at {gsd_eval:.2f} mm/px{why}; {fix}, or lower min_side_coverage to "
+                          "accept it"))
+    if short:  # every turbine named at once: a site of 100 must not be planned once per refusal
+        more = [tid for tid, _ in short[1:]]
+        raise PlanError(short[0][1] + (f" ({len(more)} more turbine(s) short too: "
+                                       f"{', '.join(more[:20])}{' ...' if len(more) > 20 else ''})"
+                                       if more else ""))
 
     summary = _summary(routes, mission, pattern, check, coverage, assignment, gsd_eval,
                        gsd_nominal, pp, notes, launch, st_pass)
