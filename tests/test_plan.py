@@ -780,6 +780,18 @@ def test_every_turbine_short_of_coverage_is_named_at_once():
     assert said.endswith("(2 more turbine(s) short too: T2, T3)")
 
 
+def test_a_turbine_too_far_from_the_launch_point_says_so():
+    """On a wide site the battery is spent flying out and back: the refusal says how much of
+    the sortie that is and to launch nearer, not only to raise the battery."""
+    ts = (make_turbine(az=0, tid="T1", base=(0.0, 0, 0)),
+          make_turbine(az=0, tid="T2", base=(5200.0, 0, 0)))
+    m = Mission(ts, CAM, settings=Settings(inspect_tower=False, min_side_coverage=0.0))
+    with pytest.raises(PlanError, match=r"T2 \S+ takes [0-9.]+ min from take-off to landing, more "
+                       r"than one battery allows \(.*\); [0-9.]+ min of it is the flight to and "
+                       r"from the launch point 5\.[0-9] km away: launch nearer \(fleet\.launch\)"):
+        plan_mission(m, workers=1)
+
+
 def test_photo_azimuths_not_spread_like_a_rotor_are_refused():
     """A merged or missed blade must never become a plan around blades that are not there."""
     from wtcli.errors import PerceptionError

@@ -513,10 +513,16 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
         if sortie + t_to + t_ch + t_back > limit:
             fresh = _flown(np.vstack([launch, above]), v_fast, climb) + leg_s(above, ch.start)
             if fresh + t_ch + t_back > usable:
+                # Mostly the flight out and back when the turbine is far: say which it is.
+                away = fresh - _flown(np.vstack([launch, above]), v_fast, climb) + t_back
+                far = float(np.linalg.norm((ch.start - launch)[:2]))
+                hint = (f"; {away / 60:.1f} min of it is the flight to and from the launch point "
+                        f"{far / 1000:.1f} km away: launch nearer (fleet.launch), or plan the "
+                        "far turbines as a site of their own" if away > t_ch else "")
                 raise PlanError(
                     f"{ch.turbine} {ch.name} takes {(fresh + t_ch + t_back) / 60:.1f} min from "
                     f"take-off to landing, more than one battery allows "
-                    f"({_battery_words(fl)}); raise battery_minutes or the speeds")
+                    f"({_battery_words(fl)}){hint}; raise battery_minutes or the speeds")
             if len(wps) > 2:  # not already on a fresh battery at the launch point
                 go_home()
                 wps.append(WP(launch.copy(), None, False, "launch", False))  # battery swap
