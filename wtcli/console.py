@@ -195,6 +195,17 @@ def _stage_lines(texts: dict[str, str], name: str) -> StageProgress:
 
 
 @contextmanager
+def busy(text: str) -> Iterator[None]:
+    """A spinner with ``text`` on stderr while a step without a count runs (writing many files);
+    nothing in a log, where the step's own line follows it."""
+    if not err_console.is_terminal:
+        yield
+        return
+    with err_console.status(text):
+        yield
+
+
+@contextmanager
 def stage_bars(texts: dict[str, str], name: str = "wtinspect") -> Iterator[StageProgress]:
     """A transient progress bar per stage on stderr; yields the ``progress`` callback to pass
     on. ``texts``: what each stage is called on screen (else its name). In a log (stderr

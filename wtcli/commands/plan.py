@@ -7,7 +7,7 @@ from typing import List, Optional
 
 import typer
 
-from wtcli.console import err_console, stage_bars
+from wtcli.console import busy, err_console, stage_bars
 from wtcli.errors import ConfigError, UsageError
 from wtcli.jsonio import dumps
 from wtcli.plan_file import PLAN_SCHEMA, PLAN_VERSION, write_plan
@@ -131,7 +131,9 @@ def register(app: typer.Typer) -> None:
                 from wtcli.plan.exports import check_export_names, check_map_is_ours
                 check_export_names(export_dir, stem, mission.fleet.uavs)
                 check_map_is_ours(export_dir, stem)
-            azimuths, sources = blade_azimuths(mission, list(inputs or []), _pose(camera_pose), fast=fast)
+            with stage_bars({"photos": "overview photos"}, "plan") as progress:
+                azimuths, sources = blade_azimuths(mission, list(inputs or []), _pose(camera_pose),
+                                                   fast=fast, progress=progress)
             for tid, src in sources.items():
                 err_console.print(f"{tid}: blade azimuths "
                                   f"{', '.join(f'{a:.1f}' for a in azimuths[tid])} deg from {src}",
@@ -144,8 +146,10 @@ def register(app: typer.Typer) -> None:
                 # The plan JSON is written once the export is staged, before it replaces the
                 # earlier set: a failed export leaves the earlier plan and its export together.
                 fl = mission.fleet
-                done = export_all(result, export_dir, stem=stem, cruise=fl.cruise_speed_m_s,
-                                  hover=fl.inspection_speed_m_s, dji=dji_kmz, before_swap=write_out)
+                with busy(f"writing the exports to {export_dir}"):  # 20 s for 100 turbines
+                    done = export_all(result, export_dir, stem=stem, cruise=fl.cruise_speed_m_s,
+                                      hover=fl.inspection_speed_m_s, dji=dji_kmz,
+                                      before_swap=write_out)
                 for p in done.stale:
                     err_console.print(f"exports: removed {p}, a staging folder a killed run left",
                                       soft_wrap=True)

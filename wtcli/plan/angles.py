@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wtcli.console import StageProgress, stage_ticker
 from wtcli.errors import InputError, PerceptionError, UsageError
 from wtcli.pitch.rotor import ROTOR_GAP_TOLERANCE_DEG
 from wtcli.plan.config import CameraPose, Mission
@@ -153,14 +154,16 @@ def combine_azimuths(sets: list[list[float]], names: list[str], where: str) -> l
 
 
 def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None = None,
-                   fast: bool = False) -> tuple[dict[str, list[float]], dict[str, str]]:
+                   fast: bool = False, progress: StageProgress | None = None
+                   ) -> tuple[dict[str, list[float]], dict[str, str]]:
     """Rotor azimuths per turbine from the given inputs and the turbines' ``photo`` keys.
 
     Several images of one turbine (several photos, or a pitch file with several images) are
     combined: each is back-projected on its own, checked, and the blade angles averaged
     (``combine_azimuths``). Returns (azimuths, where they came from). Turbines without any photo
     keep their YAML angles (not in the result). ``fast``: photos get one pass of the network
-    (``chain.photo_input``)."""
+    (``chain.photo_input``). ``progress``: stage "photos", per input (a photo is segmented:
+    seconds each)."""
     ids = {t.id for t in mission.turbines}
     todo: list[tuple[str | None, Path]] = [_parse(a, ids) for a in inputs]
     named = {tid for tid, _ in todo if tid}
@@ -172,6 +175,7 @@ def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None 
     per: dict[str, list[tuple[list[float], str]]] = {}
     how: dict[str, str] = {}
     notes: dict[str, list[str]] = {}
+    tick = stage_ticker(progress, "photos", len(todo)) if todo else (lambda: None)
     for tid, path in todo:
         expected = mission.turbine(tid).n_blades if tid else mission.turbines[0].n_blades
         for res, image_name in _pitch_results(path, expected, fast):
@@ -214,6 +218,7 @@ def blade_azimuths(mission: Mission, inputs: list[str], pose: CameraPose | None 
             per.setdefault(owner, []).append((az, name))
             how[owner] = ("the given camera pose" if p and not own else own if p else
                           "S_p looking at the rotor centre" + (f" ({own})" if own else ""))
+        tick()
     azimuths: dict[str, list[float]] = {}
     sources: dict[str, str] = {}
     for owner, found in per.items():
