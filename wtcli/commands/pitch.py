@@ -8,7 +8,7 @@ from typing import List, Optional
 import cv2
 import typer
 
-from wtcli.console import err_console, make_progress
+from wtcli.console import err_console, stage_bars, stage_ticker
 from wtcli.errors import InputError, PartialFailure, PerceptionError
 from wtcli.jsonio import atomic_write_bytes, dumps, write_json
 from wtcli.pitch.inputs import is_photo, load_pitch_input, pitch_batch
@@ -78,11 +78,11 @@ def register(app: typer.Typer) -> None:
                 [inp.image for inp in loaded]
             check_not_inputs([("--overlay-dir file", overlay_dir / n)
                               for n in overlay_names(records)], given)
-        if n_images > 1 and err_console.is_terminal:
-            with make_progress(transient=True) as progress:
-                task = progress.add_task("pitch", total=n_images, status="")
-                batch = run(lambda k, err: progress.update(
-                    task, advance=1, status="" if err is None else "failed"))
+        texts = {"images": "pitch", "overlays": "overlays"}
+        if n_images > 1:  # a bar on a terminal, lines in a log once it has run a while
+            with stage_bars(texts, "pitch") as progress:
+                tick = stage_ticker(progress, "images", n_images)
+                batch = run(lambda k, err: tick())
         else:
             batch = run()
         for res, inp in zip(batch.results, batch.inputs):
@@ -98,17 +98,21 @@ def register(app: typer.Typer) -> None:
             overlays = []
             # From every record, failed ones too: a name must not change with what else failed.
             names = overlay_names([inp.image for inp in batch.inputs])
-            for k, (res, inp) in enumerate(zip(batch.results, batch.inputs)):
-                if res is None:
-                    overlays.append(None)
-                    continue
-                bg, note = overlay_background(inp, image, read_image)  # as segment read it
-                if note:
-                    err_console.print(f"note: {note}", soft_wrap=True)
-                ok, png = cv2.imencode(".png", draw_pitch_overlay(bg, res))
-                path = overlay_dir / names[k]
-                atomic_write_bytes(path, png.tobytes())
-                overlays.append(str(path))
+            with stage_bars(texts, "pitch") as progress:  # drawn on the photos: seconds each
+                tick = stage_ticker(progress if n_images > 1 else None, "overlays", n_images)
+                for k, (res, inp) in enumerate(zip(batch.results, batch.inputs)):
+                    if res is None:
+                        overlays.append(None)
+                        tick()
+                        continue
+                    bg, note = overlay_background(inp, image, read_image)  # as segment read it
+                    if note:
+                        err_console.print(f"note: {note}", soft_wrap=True)
+                    ok, png = cv2.imencode(".png", draw_pitch_overlay(bg, res))
+                    path = overlay_dir / names[k]
+                    atomic_write_bytes(path, png.tobytes())
+                    overlays.append(str(path))
+                    tick()
         doc = batch.to_document(overlays)
         if out is not None:
             write_json(out, doc)
