@@ -260,3 +260,18 @@ def test_a_large_instances_file_is_read_one_image_at_a_time(tmp_path, stage):
         peaks[n] = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
     assert peaks[8] - peaks[2] < 9e6, peaks  # six more images' masks would be 36 MB
+
+
+def test_a_contours_file_is_written_one_image_at_a_time_the_same_bytes(tmp_path):
+    """`contours --out` streams the file image by image: the bytes of the whole document."""
+    from wtcli.contours import contours_batch
+    from wtcli.jsonio import write_json
+
+    path = _many_images(tmp_path / "i.json", 3, size=200)
+    batch = contours_batch([path])
+    want = write_json(tmp_path / "whole.json", batch.to_document()).read_bytes()
+    assert batch.write(tmp_path / "streamed.json").read_bytes() == want
+    empty = contours_batch([path])
+    empty = type(empty)((), (), (), empty.source, empty.area_threshold)
+    assert empty.write(tmp_path / "e.json").read_bytes() == \
+        write_json(tmp_path / "e2.json", empty.to_document()).read_bytes()

@@ -26,7 +26,7 @@ import numpy as np
 
 from wtcli.console import StageProgress, stage_ticker
 from wtcli.errors import InputError, PerceptionError
-from wtcli.jsonio import document, read_json, shown
+from wtcli.jsonio import atomic_write_bytes, document, dumps_streamed, read_json, shown
 from wtcli.masks import (LABELS, Instances, InstancesFile, check_declared_size, check_pixels,
                          check_size)
 
@@ -352,15 +352,20 @@ class ContoursBatch:
         return sum(e is not None for e in self.errors)
 
     def to_document(self) -> dict[str, Any]:
-        items = []
-        for cs, err, img in zip(self.sets, self.errors, self.images):
-            if cs is None:
-                items.append({"image": img, "error": err})
-            else:
-                items.append({**cs.to_dict(), "error": None})
+        return {**self._header(), "images": list(self._items())}
+
+    def write(self, path: str | Path) -> Path:
+        """``write_json(path, self.to_document())``, byte for byte, one image's contours turned
+        into JSON at a time (a folder's contours file can be hundreds of MB)."""
+        return atomic_write_bytes(path, dumps_streamed(self._header(), "images", self._items()))
+
+    def _header(self) -> dict[str, Any]:
         return document(CONTOURS_SCHEMA, CONTOURS_VERSION,
-                        {"source": self.source, "area_threshold": self.area_threshold,
-                         "images": items})
+                        {"source": self.source, "area_threshold": self.area_threshold, "images": []})
+
+    def _items(self) -> Iterator[dict[str, Any]]:
+        for cs, err, img in zip(self.sets, self.errors, self.images):
+            yield {"image": img, "error": err} if cs is None else {**cs.to_dict(), "error": None}
 
 
 def contours_batch(paths: list[Path], area_threshold: float = DEFAULT_AREA_THRESHOLD,

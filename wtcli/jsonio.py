@@ -13,8 +13,9 @@ import os
 import re
 import reprlib
 import tempfile
+import textwrap
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Iterable, Iterator
 
 import numpy as np
 
@@ -164,6 +165,23 @@ def atomic_write_bytes(path: str | Path, data: bytes | Iterable[bytes]) -> Path:
 
 def write_json(path: str | Path, doc: Any, digits: int = FLOAT_DIGITS) -> Path:
     return atomic_write_text(path, dumps(doc, digits))
+
+
+def dumps_streamed(doc: dict[str, Any], key: str, items: Iterable[Any],
+                   digits: int = FLOAT_DIGITS) -> Iterator[bytes]:
+    """``dumps(doc)`` with the top-level ``doc[key]`` the list of ``items``, and its final
+    newline, byte for byte as ``write_json`` writes it, in pieces made one item at a time: a
+    file of a whole photo folder need never be in memory at once (give it to
+    ``atomic_write_bytes``)."""
+    here = f"@@{key}:{os.urandom(8).hex()}@@"  # stands for the list in the document's text
+    head, tail = dumps({**doc, key: here}, digits).split(json.dumps(here), 1)
+    yield head.encode("utf-8")
+    n = 0
+    for item in items:
+        text = textwrap.indent(dumps(item, digits), "  ")  # as items of a top-level list
+        yield (("[\n" if n == 0 else ",\n") + text).encode("utf-8")
+        n += 1
+    yield (("\n ]" if n else "[]") + tail + "\n").encode("utf-8")
 
 
 def size_text(n: int) -> str:

@@ -8,9 +8,7 @@ starting with a background run) or polygons ``[[x1, y1, x2, y2, ...], ...]`` (fo
 
 from __future__ import annotations
 
-import json
 import math
-import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable
@@ -19,8 +17,8 @@ import cv2
 import numpy as np
 
 from wtcli.errors import InputError
-from wtcli.jsonio import (atomic_write_bytes, document, dumps, number, read_json, shown,
-                          write_json)
+from wtcli.jsonio import (atomic_write_bytes, document, dumps_streamed, number, read_json,
+                          shown, write_json)
 
 LABELS = ("blade", "tower", "nacelle")
 CATEGORIES = [{"id": i + 1, "name": n, "supercategory": "wind_turbine"} for i, n in enumerate(LABELS)]
@@ -465,9 +463,6 @@ def write_instances(path: str | Path, images: list[dict], per_image: list[Instan
     return write_json(path, instances_document(images, per_image, encoding, extra))
 
 
-_ANNOTATIONS_HERE = "@@annotations@@"
-
-
 def write_instances_streamed(path: str | Path, images: list[dict],
                              annotations: Iterable[list[dict]], extra: dict | None = None) -> Path:
     """``write_instances``, byte for byte, from each image's annotations as they come (e.g. read
@@ -476,21 +471,17 @@ def write_instances_streamed(path: str | Path, images: list[dict],
     ``annotations``: per image of ``images``, in order, its COCO annotations (their ``id`` and
     ``image_id`` are replaced)."""
     body = {"info": {"description": "wtinspect instances"}, "licenses": [], "images": images,
-            "annotations": _ANNOTATIONS_HERE, "categories": CATEGORIES, **(extra or {})}
-    head, tail = dumps(document(INSTANCES_SCHEMA, INSTANCES_VERSION, body)).split(
-        json.dumps(_ANNOTATIONS_HERE), 1)
+            "annotations": [], "categories": CATEGORIES, **(extra or {})}
 
-    def pieces():
-        yield head.encode("utf-8")
+    def renumbered():
         n = 0
         for img, anns in zip(images, annotations, strict=True):
             for a in anns:
                 n += 1
-                text = dumps({**a, "id": n, "image_id": int(img["id"])})
-                yield (("[\n" if n == 1 else ",\n") + textwrap.indent(text, "  ")).encode("utf-8")
-        yield (("\n ]" if n else "[]") + tail + "\n").encode("utf-8")
+                yield {**a, "id": n, "image_id": int(img["id"])}
 
-    return atomic_write_bytes(path, pieces())
+    return atomic_write_bytes(path, dumps_streamed(
+        document(INSTANCES_SCHEMA, INSTANCES_VERSION, body), "annotations", renumbered()))
 
 
 def read_coco_document(path: str | Path) -> dict:

@@ -10,7 +10,7 @@ import typer
 from wtcli.console import err_console, stage_bars
 from wtcli.contours import DEFAULT_AREA_THRESHOLD, contours_batch
 from wtcli.errors import PartialFailure, PerceptionError
-from wtcli.jsonio import dumps, write_json
+from wtcli.jsonio import dumps
 from wtcli.outputs import check_not_inputs, check_outputs
 
 
@@ -32,11 +32,10 @@ def register(app: typer.Typer) -> None:
         check_outputs(files=[out])
         with stage_bars({"images": "contours"}, "contours") as progress:
             batch = contours_batch(inputs, area_threshold, progress)
-        doc = batch.to_document()
         if out is not None:
-            write_json(out, doc)
+            batch.write(out)  # one image at a time
         if json_out:
-            typer.echo(dumps(doc))
+            typer.echo(dumps(batch.to_document()))
         elif out is None:
             for cs, err, img in zip(batch.sets, batch.errors, batch.images):
                 name = img.get("file_name") or img.get("id", "?")
