@@ -1081,12 +1081,17 @@ def test_a_batch_holds_one_photos_masks_at_a_time(tmp_path, monkeypatch):
     assert peaks[8] - peaks[2] < 6e6, peaks  # six more photos' masks would be 36 MB
 
 
+def _png_folder(folder: Path, n: int, name: str = "{}.png") -> Path:
+    """``n`` small test photos named ``name.format(i)``."""
+    folder.mkdir()
+    for i in range(n):
+        cv2.imwrite(str(folder / name.format(i)), _image(seed=i))
+    return folder
+
+
 def test_a_photos_instances_file_gone_before_the_end_is_said(tmp_path, monkeypatch):
     _fake_segment(monkeypatch)
-    folder = tmp_path / "p"
-    folder.mkdir()
-    for i in range(2):
-        cv2.imwrite(str(folder / f"{i}.png"), _image(seed=i))
+    folder = _png_folder(tmp_path / "p", 2)
     out = tmp_path / "out"
     b = batch.segment_paths(folder, out, lambda img: infer.segment_image(img, None, 0.5))
     (out / "instances" / "1.json").unlink()
@@ -1101,10 +1106,7 @@ def test_a_large_batch_says_where_every_photo_is(cli, random_weights, tmp_path, 
     """Over 40 photos the summary lists the failed ones only; with none failed it prints no
     empty table but where every photo's row is."""
     _fake_segment(monkeypatch)
-    folder = tmp_path / "p"
-    folder.mkdir()
-    for i in range(41):
-        cv2.imwrite(str(folder / f"{i:02d}.png"), _image(seed=i))
+    folder = _png_folder(tmp_path / "p", 41, "{:02d}.png")
     out = tmp_path / "seg"
     res = cli("segment", folder, "--out", out, "--model", random_weights, "--no-refine")
     assert res.exit_code == 0, res.stderr[-800:]
