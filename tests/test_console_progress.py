@@ -44,7 +44,7 @@ def test_a_long_staged_computation_says_where_it_is(log):
             progress("coverage", k, 2)
             clock.t += 40.0  # one slow job after another
     got = lines()
-    assert got[0] == "plan: trajectories: 10/100 (10 %), 10 s"  # once it has run 10 s
+    assert got[0] == "plan: trajectories: 10/100 (10 %), 10 s"  # after LOG_QUIET_S
     assert all(ln.startswith("plan: trajectories: ") for ln in got[:-2])
     assert len(got) - 2 == 10  # 10 %, 20 %, ... 100 %
     assert got[-2:] == ["plan: coverage check: 1/2 (50 %), 40 s",
