@@ -35,8 +35,8 @@ from typing import Callable
 
 import numpy as np
 
-from wtcli.errors import ConfigError, OutputError
-from wtcli.jsonio import write_failed
+from wtcli.errors import ConfigError, InputError, OutputError
+from wtcli.jsonio import read_json, write_failed
 from wtcli.plan.geodesy import MAX_SITE_RADIUS_M, check_site_extent, enu_to_geodetic
 from wtcli.plan_file import Plan, Route
 
@@ -366,12 +366,11 @@ def check_map_is_ours(out_dir: str | Path, stem: str) -> None:
         return
     ours = False
     try:
-        if path.stat().st_size <= MAX_MAP_BYTES:
-            doc = json.loads(path.read_bytes())
-            kinds = [f["properties"]["kind"] for f in doc["features"]]
-            ours = (doc.get("type") == "FeatureCollection" and "route" in kinds
-                    and all(k in MAP_KINDS for k in kinds))
-    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        doc = read_json(path, max_bytes=MAX_MAP_BYTES)
+        kinds = [f["properties"]["kind"] for f in doc["features"]]
+        ours = (doc.get("type") == "FeatureCollection" and "route" in kinds
+                and all(k in MAP_KINDS for k in kinds))
+    except (InputError, KeyError, TypeError, AttributeError):  # unreadable or another shape
         pass
     if not ours:
         raise OutputError(f"{path}: is not the map of an earlier wtinspect export, and this "

@@ -514,7 +514,7 @@ def build_route(uav: str, chunks: list[Chunk], launch: np.ndarray, mission: Miss
             fresh = _flown(np.vstack([launch, above]), v_fast, climb) + leg_s(above, ch.start)
             if fresh + t_ch + t_back > usable:
                 # Mostly the flight out and back when the turbine is far: say which it is.
-                away = fresh - _flown(np.vstack([launch, above]), v_fast, climb) + t_back
+                away = leg_s(above, ch.start) + t_back
                 far = float(np.linalg.norm((ch.start - launch)[:2]))
                 hint = (f"; {away / 60:.1f} min of it is the flight to and from the launch point "
                         f"{far / 1000:.1f} km away: launch nearer (fleet.launch), or plan the "
@@ -769,9 +769,7 @@ def _tour(job: tuple) -> tuple[list[Chunk], dict, list[float]]:
                  for a, b in zip(chunks, chunks[1:]))
     sp = speeds(job[3], pp)
     times = [chunk_time(c, sp) for c in chunks]
-    # The turbine's memos (its coverage cells, ~16 MB) are done with: kept, a site's worth
-    # filled the memory (100 turbines 2.9 GB in one process). What needs them again makes them.
-    job[0]._cache.clear()
+    job[0].forget()  # its coverage memos, kept for a whole site, filled the memory
     return chunks, links, times
 
 
@@ -905,7 +903,7 @@ def _side_coverage(job: tuple) -> tuple[dict, float, float]:
     t, (pos, rot), camera, gsd, spacing, incidence = job
     cov = turbine_coverage(t, camera, pos, rot, gsd, spacing, incidence)
     out = cov.by_blade_side(), cov.blade_average(), cov.structure_fraction()
-    t._cache.clear()  # as in _tour: one turbine's memos held at a time
+    t.forget()  # as in _tour: one turbine's memos held at a time
     return out
 
 
